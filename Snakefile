@@ -1,0 +1,20 @@
+# scenebot: autonomous scene capture, as a Snakemake workflow.
+# This file is the table of contents; every decision lives in the scenebot package.
+#   snakemake --cores 2                         the default campaign (config.yaml)
+#   snakemake --cores 2 --configfile my.yaml    another campaign
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config.yaml"
+
+
+include: "rules/common.smk"
+include: "rules/capture.smk"
+
+
+rule all:
+    input:
+        campaign_targets(),
+    default_target: True

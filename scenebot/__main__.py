@@ -1,0 +1,3 @@
+from scenebot.cli import main
+
+raise SystemExit(main())

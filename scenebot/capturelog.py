@@ -1,0 +1,90 @@
+"""The capture log: ``round_{r}/capture/log.jsonl``, one JSON object per line.
+
+Record types (field ``type``):
+
+``session`` (first line)
+    ``robot`` (backend name), ``scene``, ``round``, ``started`` (ISO time),
+    ``camera``: ``{"width", "height", "focal_px", "model": "PINHOLE"}`` as configured (a real
+    camera's EXIF is the authority; SfM reads EXIF, not this), ``config``: the stage config.
+``photo``
+    ``t`` (robot clock, s), ``index`` (0-based within the round), ``image`` (path relative to
+    the capture folder, e.g. ``images/r000_0042.jpg``), ``odometry`` ``{x, y, theta}`` (m, rad,
+    odometry frame, see :mod:`scenebot.robot.base`), ``compass_deg``, ``ultrasonic_cm``
+    (255 = no echo), ``bump_front``, ``bump_rear``, optional ``localization`` (visual
+    localization estimate, adaptive rounds), and for the simulator only ``truth``:
+    ``{"robot": {x, y, theta}, "center": [x, y, z], "R_cam_from_world": 3x3 row-major}``
+    in the world frame, camera axes as in OpenCV/COLMAP (x right, y down, z forward).
+    ``truth`` is for evaluation only: no stage may read it to make a decision.
+``event``
+    ``t``, ``event`` (``bump``, ``stall``, ``drive``, ``turn``, ``circle_done``, ``backup``,
+    ``error``, ...), ``odometry``, plus event-specific fields; simulator events carry ``truth``
+    with the robot pose.
+``end`` (last line of a complete capture)
+    ``t``, ``photos``, ``reason``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+
+def _default(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"cannot write {type(o).__name__} to the capture log")
+
+
+class CaptureLog:
+    """Append-only JSONL writer that flushes and fsyncs every record (nothing lost on a crash)."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh: IO[str] = open(self.path, "a", encoding="utf-8")  # noqa: SIM115
+
+    def write(self, record: dict) -> None:
+        self._fh.write(json.dumps(record, default=_default, sort_keys=False) + "\n")
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.close()
+
+    def __enter__(self) -> CaptureLog:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def read_log(path: Path) -> Iterator[dict]:
+    """Yield the records of a capture log; a truncated last line (crash) is skipped."""
+    path = Path(path)
+    with open(path, encoding="utf-8") as fh:
+        lines = fh.readlines()
+    for i, line in enumerate(lines):
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            yield json.loads(line)
+        except json.JSONDecodeError as exc:
+            if i == len(lines) - 1:
+                return  # a record cut off by a crash
+            raise ValueError(f"{path}:{i + 1}: not a JSON record ({exc})") from exc
+
+
+def photo_records(path: Path) -> list[dict]:
+    """The ``photo`` records of a capture log, in order."""
+    return [r for r in read_log(path) if r.get("type") == "photo"]

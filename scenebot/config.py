@@ -1,0 +1,238 @@
+"""The typed configuration: the single source of truth for every setting.
+
+``config.yaml`` is validated against :class:`Config` when the workflow starts (and by every
+CLI command). The JSON schema used by ``snakemake.utils.validate``
+(``scenebot/config.schema.json``) is generated from this module with
+``scenebot schema --write``; a test keeps the two in sync.
+
+This module must stay light to import: the Snakefile loads it at every start.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+SCHEMA_PATH = Path(__file__).with_name("config.schema.json")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class StartPose(_Model):
+    """Robot start pose in the world frame (m, degrees counter-clockwise from +x)."""
+
+    x: float
+    y: float
+    theta_deg: float = 0.0
+
+
+class WorldConfig(_Model):
+    """The simulated world: a built-in scene or a textured mesh file."""
+
+    builtin: Literal["office"] | None = Field(
+        "office", description="Built-in scene generator; null when `file` is set."
+    )
+    file: Path | None = Field(
+        None,
+        description="Textured mesh scene (OBJ+MTL, PLY with UVs, glTF/GLB), metres, z up.",
+    )
+    seed: int = Field(7, description="Seed of the built-in scene generator.")
+    floor_z: float | None = Field(
+        None, description="Floor height (m); null: 0 for built-in scenes, detected for files."
+    )
+    start: StartPose | None = Field(None, description="Start pose; null: the scene's default.")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> WorldConfig:
+        if (self.builtin is None) == (self.file is None):
+            raise ValueError(
+                "set exactly one of world.builtin (allowed: 'office') and world.file "
+                "(a path to an OBJ, PLY or GLB scene)"
+            )
+        return self
+
+
+class CameraConfig(_Model):
+    """The robot's camera."""
+
+    width: int = Field(640, ge=32, le=4096, description="Image width (px).")
+    height: int = Field(480, ge=24, le=4096, description="Image height (px).")
+    hfov_deg: float = Field(60.0, gt=10, lt=150, description="Horizontal field of view (deg).")
+    height_m: float = Field(0.35, gt=0, description="Height of the optical centre (m).")
+    forward_offset_m: float = Field(
+        0.10, description="Camera ahead of the rotation axis (m): baselines in circles."
+    )
+    lateral_offset_m: float = Field(0.0, description="Camera left of the robot axis (m).")
+    pitch_deg: float = Field(0.0, ge=-45, le=45, description="Upward tilt (deg).")
+    sensor_width_mm: float = Field(5.76, gt=0, description="Sensor width for EXIF (mm).")
+    jpeg_quality: int = Field(92, ge=50, le=100)
+    antialias: bool = Field(True, description="Supersample geometric edges.")
+    noise_sigma: float = Field(1.5, ge=0, description="Sensor noise (8-bit levels).")
+
+
+class BodyConfig(_Model):
+    """Robot body and drive train."""
+
+    radius_m: float = Field(0.15, gt=0, description="Circular footprint radius (m).")
+    height_m: float = Field(0.40, gt=0, description="Robot height (m): collision band top.")
+    clearance_m: float = Field(0.01, ge=0, description="Collision band bottom above floor.")
+    wheel_radius_m: float = Field(0.028, gt=0)
+    wheel_base_m: float = Field(0.16, gt=0, description="Distance between the wheels (m).")
+    max_wheel_speed_deg_s: float = Field(720.0, gt=0, description="Wheel speed at power 100.")
+    drive_speed_deg_s: float = Field(360.0, gt=0, description="Wheel speed when driving.")
+    turn_speed_deg_s: float = Field(240.0, gt=0, description="Wheel speed when turning.")
+
+
+class SlipConfig(_Model):
+    """Wheel slip: true motion = commanded x (1 - slip + noise); mostly on turns."""
+
+    drive: float = Field(0.02, ge=0, lt=1, description="Mean slip when driving straight.")
+    drive_noise: float = Field(0.01, ge=0, description="Std of the drive slip.")
+    turn: float = Field(0.08, ge=0, lt=1, description="Mean slip when turning in place.")
+    turn_noise: float = Field(0.03, ge=0, description="Std of the turn slip.")
+    heading_drift_deg_per_m: float = Field(
+        1.0, ge=0, description="Std of heading drift when driving straight (deg per m)."
+    )
+
+
+class SensorConfig(_Model):
+    """Compass, ultrasonic rangefinder, bumpers, stall detection."""
+
+    compass_noise_deg: float = Field(1.0, ge=0)
+    compass_offset_deg: float = Field(
+        0.0, description="Magnetic north relative to the world +x axis (deg, CCW)."
+    )
+    ultrasonic_cone_deg: float = Field(30.0, gt=0, le=90, description="Full cone angle.")
+    ultrasonic_max_m: float = Field(2.55, gt=0, le=2.55)
+    ultrasonic_noise_cm: float = Field(1.0, ge=0)
+    ultrasonic_height_m: float = Field(0.15, gt=0)
+    ultrasonic_max_incidence_deg: float = Field(
+        60.0, gt=0, le=90, description="No echo from surfaces hit more obliquely than this."
+    )
+    bumper_arc_deg: float = Field(
+        120.0, gt=0, le=180, description="Front and rear bumpers each cover this arc."
+    )
+    bumper_z_min_m: float = Field(0.02, ge=0)
+    bumper_z_max_m: float = Field(0.12, gt=0)
+    stall_window_s: float = Field(0.3, gt=0, description="Stall: no wheel progress for this.")
+    stall_min_progress_deg: float = Field(3.0, gt=0)
+
+
+class SimConfig(_Model):
+    """The simulated robot."""
+
+    camera: CameraConfig = CameraConfig()
+    body: BodyConfig = BodyConfig()
+    slip: SlipConfig = SlipConfig()
+    sensors: SensorConfig = SensorConfig()
+    dt_s: float = Field(0.01, gt=0, le=0.1, description="Physics time step (s).")
+    photo_time_s: float = Field(1.5, ge=0, description="Simulated time per photo (s).")
+
+
+class ExplorationConfig(_Model):
+    """Round 0: random exploration (paper IV.A)."""
+
+    photos: int = Field(100, ge=1, description="Photos to take in round 0.")
+    circle_step_deg: float = Field(10.0, gt=0, le=90, description="Turn between photos.")
+    drive_min_m: float = Field(0.4, gt=0)
+    drive_max_m: float = Field(1.5, gt=0)
+    backup_m: float = Field(0.12, gt=0, description="Back-up distance after a bump/stall.")
+    escape_turn_min_deg: float = Field(60.0, ge=0, le=180)
+    escape_turn_max_deg: float = Field(180.0, ge=0, le=180)
+    max_escapes: int = Field(6, ge=1, description="Bumps per leg before starting a circle.")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> ExplorationConfig:
+        if self.drive_max_m < self.drive_min_m:
+            raise ValueError("exploration.drive_max_m must be >= exploration.drive_min_m")
+        if self.escape_turn_max_deg < self.escape_turn_min_deg:
+            raise ValueError(
+                "exploration.escape_turn_max_deg must be >= exploration.escape_turn_min_deg"
+            )
+        return self
+
+
+class Config(_Model):
+    """A scenebot campaign."""
+
+    scene: str = Field(
+        "office",
+        pattern=r"^[A-Za-z0-9_.-]+$",
+        description="Name of the campaign: results go to results/<scene>/.",
+    )
+    robot: Literal["sim"] = Field("sim", description="Robot backend.")
+    seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
+    world: WorldConfig = WorldConfig()
+    sim: SimConfig = SimConfig()
+    exploration: ExplorationConfig = ExplorationConfig()
+
+
+# ---------------------------------------------------------------------------- loading
+class ConfigError(ValueError):
+    """An invalid configuration; the message names each bad key and what is allowed."""
+
+
+def _format_errors(exc: ValidationError, source: str) -> str:
+    lines = [f"invalid configuration in {source}:"]
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"] if not str(p).startswith("function-after"))
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key (check its spelling; `scenebot schema` lists all keys)"
+        elif err["type"] == "literal_error":
+            allowed = err.get("ctx", {}).get("expected", "")
+            msg = f"got {err.get('input')!r}; allowed values: {allowed}"
+        lines.append(f"  - {loc or '(top level)'}: {msg}")
+    return "\n".join(lines)
+
+
+def validate_config(data: dict[str, Any] | None, source: str = "config") -> Config:
+    """Validate a config mapping.
+
+    Raises:
+        ConfigError: with one line per bad key naming it and the allowed values.
+    """
+    try:
+        return Config.model_validate(data or {})
+    except ValidationError as exc:
+        raise ConfigError(_format_errors(exc, source)) from None
+
+
+def load_config(path: Path | str) -> Config:
+    """Read and validate a YAML config file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {path} not found (copy config.yaml from the repository)")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+    return validate_config(data, str(path))
+
+
+def json_schema() -> dict[str, Any]:
+    """The JSON schema of :class:`Config` (what ``config.schema.json`` holds)."""
+    schema = Config.model_json_schema(mode="validation")
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
+
+
+def write_schema(path: Path = SCHEMA_PATH) -> Path:
+    path.write_text(json.dumps(json_schema(), indent=2, sort_keys=True) + "\n")
+    return path
+
+
+def section_json(cfg: Config, *keys: str) -> str:
+    """The named top-level sections of ``cfg`` as canonical JSON (for Snakemake params)."""
+    dump = cfg.model_dump(mode="json")
+    return json.dumps({k: dump[k] for k in keys}, sort_keys=True, separators=(",", ":"))
+
+
+def from_sections(text: str) -> Config:
+    """Rebuild a :class:`Config` from :func:`section_json` output (other sections default)."""
+    return validate_config(json.loads(text), "stage parameters")

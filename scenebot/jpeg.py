@@ -1,0 +1,97 @@
+"""Writing and checking JPEG photos with the EXIF tags photogrammetry tools read.
+
+COLMAP and most SfM tools derive the focal length in pixels from EXIF: the 35 mm equivalent
+focal length, or the focal length in mm with the focal-plane resolution (pixels per unit) or
+a sensor database. We write all of them so any reader finds a consistent value.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, TiffImagePlugin
+
+EXIF_IFD = 0x8769
+TAG_MAKE = 0x010F
+TAG_MODEL = 0x0110
+TAG_DATETIME_ORIGINAL = 0x9003
+TAG_FOCAL_LENGTH = 0x920A
+TAG_FOCAL_35MM = 0xA405
+TAG_FOCAL_PLANE_XRES = 0xA20E
+TAG_FOCAL_PLANE_YRES = 0xA20F
+TAG_FOCAL_PLANE_UNIT = 0xA210
+UNIT_CM = 3
+
+
+def _rational(x: float) -> TiffImagePlugin.IFDRational:
+    f = Fraction(x).limit_denominator(100000)
+    return TiffImagePlugin.IFDRational(f.numerator, f.denominator)
+
+
+def write_jpeg(
+    path: Path,
+    rgb: np.ndarray,
+    focal_px: float,
+    sensor_width_mm: float,
+    quality: int = 92,
+    make: str = "scenebot",
+    model: str = "SimCam 640",
+    when: _dt.datetime | None = None,
+) -> Path:
+    """Write an RGB image as a JPEG with EXIF focal length tags, atomically.
+
+    Args:
+        path: destination ``.jpg``.
+        rgb: (H, W, 3) uint8 image.
+        focal_px: focal length in pixels (square pixels).
+        sensor_width_mm: physical sensor width used to express the focal length in mm.
+        quality: JPEG quality (1-100).
+        make, model: EXIF camera make and model.
+        when: capture time for DateTimeOriginal.
+
+    Returns:
+        The path written.
+    """
+    path = Path(path)
+    h, w = rgb.shape[:2]
+    focal_mm = focal_px * sensor_width_mm / w
+    exif = Image.Exif()
+    exif[TAG_MAKE] = make
+    exif[TAG_MODEL] = model
+    ifd = exif.get_ifd(EXIF_IFD)
+    ifd[TAG_FOCAL_LENGTH] = _rational(focal_mm)
+    ifd[TAG_FOCAL_35MM] = int(round(focal_px / max(w, h) * 36.0))
+    px_per_cm = w / (sensor_width_mm / 10.0)
+    ifd[TAG_FOCAL_PLANE_XRES] = _rational(px_per_cm)
+    ifd[TAG_FOCAL_PLANE_YRES] = _rational(px_per_cm)
+    ifd[TAG_FOCAL_PLANE_UNIT] = UNIT_CM
+    ifd[TAG_DATETIME_ORIGINAL] = (when or _dt.datetime.now()).strftime("%Y:%m:%d %H:%M:%S")
+    tmp = path.with_name(path.name + ".part")
+    Image.fromarray(np.ascontiguousarray(rgb)).save(tmp, "JPEG", quality=quality, exif=exif)
+    os.replace(tmp, path)
+    return path
+
+
+def exif_focal_px(path: Path) -> float | None:
+    """Focal length in pixels from a JPEG's EXIF (focal-plane resolution, then 35 mm).
+
+    Returns ``None`` when the photo carries no usable focal length.
+    """
+    with Image.open(path) as im:
+        w, h = im.size
+        exif = im.getexif()
+        ifd = exif.get_ifd(EXIF_IFD)
+    f_mm = ifd.get(TAG_FOCAL_LENGTH)
+    xres = ifd.get(TAG_FOCAL_PLANE_XRES)
+    unit = ifd.get(TAG_FOCAL_PLANE_UNIT)
+    if f_mm and xres and unit in (2, 3, 4, 5):
+        mm_per_unit = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}[unit]
+        return float(f_mm) * float(xres) / mm_per_unit
+    f35 = ifd.get(TAG_FOCAL_35MM)
+    if f35:
+        return float(f35) / 36.0 * max(w, h)
+    return None
