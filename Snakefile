@@ -15,6 +15,6 @@ include: "rules/capture.smk"
 
 
 rule all:
+    default_target: True
     input:
         campaign_targets(),
-    default_target: True

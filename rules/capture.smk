@@ -8,16 +8,19 @@ rule capture_round0:
     output:
         log=f"{RESULTS}/round_000/capture/log.jsonl",
         trajectory=f"{RESULTS}/round_000/capture/trajectory.png",
-    params:
-        cfg=stage_params("world", "sim", "exploration"),
-        out=f"{RESULTS}/round_000/capture",
     log:
         f"{RESULTS}/logs/capture_round0.log",
     benchmark:
         f"{RESULTS}/benchmarks/capture_round0.tsv"
+    localrule: True
+    conda:
+        "../envs/scenebot.yaml"
     resources:
         robot=1,
-    localrule: True
+    params:
+        py=PY,
+        cfg=stage_params("world", "sim", "exploration"),
+        out=lambda w, output: Path(output.log).parent,
     shell:
-        "{PY:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "
+        "{params.py:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "
         "2> >(tee {log:q} >&2)"

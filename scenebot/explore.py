@@ -129,7 +129,7 @@ def random_exploration(
     """
     bumps = stalls = circles = 0
     step = math.radians(cfg.circle_step_deg)
-    per_circle = max(1, int(round(360.0 / cfg.circle_step_deg)))
+    per_circle = max(1, round(360.0 / cfg.circle_step_deg))
     while photos.count < cfg.photos:
         readings: list[tuple[float, int]] = []
         for k in range(per_circle):

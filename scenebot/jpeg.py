@@ -8,6 +8,7 @@ a sensor database. We write all of them so any reader finds a consistent value.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 from fractions import Fraction
 from pathlib import Path
@@ -25,6 +26,8 @@ TAG_FOCAL_PLANE_XRES = 0xA20E
 TAG_FOCAL_PLANE_YRES = 0xA20F
 TAG_FOCAL_PLANE_UNIT = 0xA210
 UNIT_CM = 3
+FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
+"""35 mm equivalents scale by the image diagonal (as COLMAP reads them)."""
 
 
 def _rational(x: float) -> TiffImagePlugin.IFDRational:
@@ -64,7 +67,7 @@ def write_jpeg(
     exif[TAG_MODEL] = model
     ifd = exif.get_ifd(EXIF_IFD)
     ifd[TAG_FOCAL_LENGTH] = _rational(focal_mm)
-    ifd[TAG_FOCAL_35MM] = int(round(focal_px / max(w, h) * 36.0))
+    ifd[TAG_FOCAL_35MM] = round(focal_px * FULL_FRAME_DIAGONAL_MM / math.hypot(w, h))
     px_per_cm = w / (sensor_width_mm / 10.0)
     ifd[TAG_FOCAL_PLANE_XRES] = _rational(px_per_cm)
     ifd[TAG_FOCAL_PLANE_YRES] = _rational(px_per_cm)
@@ -93,5 +96,5 @@ def exif_focal_px(path: Path) -> float | None:
         return float(f_mm) * float(xres) / mm_per_unit
     f35 = ifd.get(TAG_FOCAL_35MM)
     if f35:
-        return float(f35) / 36.0 * max(w, h)
+        return float(f35) / FULL_FRAME_DIAGONAL_MM * math.hypot(w, h)
     return None

@@ -200,5 +200,5 @@ class Camera(abc.ABC):
             CameraError: no usable photo arrived within ``timeout_s``.
         """
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 (optional hook, nothing to release by default)
         """Release the camera (switch off the trigger line)."""

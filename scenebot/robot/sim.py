@@ -70,7 +70,7 @@ class SimRobot(Robot):
         t0 = w.t
         start = w.tacho_deg
         ds_total = dth_total = 0.0
-        window = max(1, int(round(self.cfg.sensors.stall_window_s / dt)))
+        window = max(1, round(self.cfg.sensors.stall_window_s / dt))
         history: deque[float] = deque(maxlen=window + 1)
         status, bumper = MotionStatus.COMPLETED, None
         while True:
@@ -83,7 +83,10 @@ class SimRobot(Robot):
             if remaining <= 1e-6:
                 break
             history.append(done)
-            if len(history) > window and history[-1] - history[0] < self.cfg.sensors.stall_min_progress_deg:
+            if (
+                len(history) > window
+                and history[-1] - history[0] < self.cfg.sensors.stall_min_progress_deg
+            ):
                 status = MotionStatus.STALLED
                 break
             w.set_wheel_speeds(left_deg * k, right_deg * k)

@@ -10,11 +10,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+# fmt: off
 _WORDS = (
-    "SCENE ROBOT LAB OFFICE MEETING PROJECT DATA VISION LIGHT FIELD CAMERA GRAPH MODEL "
-    "NOTES PLAN BUDGET REVIEW SPRING AUTUMN HELLO SAFETY EXIT LUMIGRAPH STEREO SIFT "
-    "BUNDLE MAP PATH GOAL KERNEL TEAM COFFEE PRINTER REPORT WEEKLY SEMINAR 2026 ROOM"
-).split()
+    "SCENE", "ROBOT", "LAB", "OFFICE", "MEETING", "PROJECT", "DATA", "VISION", "LIGHT",
+    "FIELD", "CAMERA", "GRAPH", "MODEL", "NOTES", "PLAN", "BUDGET", "REVIEW", "SPRING",
+    "AUTUMN", "HELLO", "SAFETY", "EXIT", "LUMIGRAPH", "STEREO", "SIFT", "BUNDLE", "MAP",
+    "PATH", "GOAL", "KERNEL", "TEAM", "COFFEE", "PRINTER", "REPORT", "WEEKLY", "SEMINAR",
+    "2026", "ROOM",
+)
+# fmt: on
 
 
 def noise(rng: np.random.Generator, size: int, octaves: int = 5, base: int = 4) -> np.ndarray:
@@ -82,9 +86,10 @@ def plaster(rng: np.random.Generator, size: int = 256, tint=(228, 226, 218)) -> 
 
 def ceiling_tiles(rng: np.random.Generator, size: int = 512) -> np.ndarray:
     """Acoustic ceiling tile: pale with pinholes and a grid edge."""
-    img = np.full((size, size, 3), 232, np.float32) * (0.97 + 0.04 * noise(rng, size, 4, 8))[
-        ..., None
-    ]
+    img = (
+        np.full((size, size, 3), 232, np.float32)
+        * (0.97 + 0.04 * noise(rng, size, 4, 8))[..., None]
+    )
     holes = rng.random((size, size)) > 0.992
     img[holes] *= 0.6
     img[:4, :] = 150
@@ -97,7 +102,7 @@ def text_block(
 ) -> None:
     """Draw lines of random words into the box (x0, y0)-(x1, y1) in place."""
     scale = rng.uniform(0.6, 1.6) * (img.shape[1] / 512)
-    thick = max(1, int(round(scale * 1.5)))
+    thick = max(1, round(scale * 1.5))
     y = y0 + int(25 * scale)
     while y < y1:
         words = " ".join(rng.choice(_WORDS, size=rng.integers(2, 6)))
@@ -172,7 +177,9 @@ def cardboard(rng: np.random.Generator, size: int = 512) -> np.ndarray:
     text_block(img, rng, size // 10 + 5, size // 10, size // 2 - 5, size // 3, (30, 30, 30))
     for _ in range(2):
         x, y = rng.integers(size // 2, size - 60, 2)
-        cv2.arrowedLine(img, (int(x), int(y + 50)), (int(x), int(y)), (40, 40, 40), 5, tipLength=0.4)
+        cv2.arrowedLine(
+            img, (int(x), int(y + 50)), (int(x), int(y)), (40, 40, 40), 5, tipLength=0.4
+        )
     for k in range(rng.integers(1, 3)):
         word = str(rng.choice(_WORDS))
         cv2.putText(
@@ -186,12 +193,16 @@ def cork(rng: np.random.Generator, size: int = 768) -> np.ndarray:
     """A cork notice board with pinned notes."""
     n = noise(rng, size, 6, 16)
     grain = rng.random((size, size)).astype(np.float32)
-    img = np.array([170, 120, 75], np.float32) * (0.7 + 0.3 * n[..., None] + 0.15 * grain[..., None])
+    img = np.array([170, 120, 75], np.float32) * (
+        0.7 + 0.3 * n[..., None] + 0.15 * grain[..., None]
+    )
     img = _to_u8(img).copy()
     for _ in range(rng.integers(5, 9)):
         nw, nh = rng.integers(size // 6, size // 3, 2)
         x, y = rng.integers(0, size - nw), rng.integers(0, size - nh)
-        paper = tuple(int(c) for c in rng.choice([[250, 250, 245], [250, 240, 130], [180, 230, 250]]))
+        paper = tuple(
+            int(c) for c in rng.choice([[250, 250, 245], [250, 240, 130], [180, 230, 250]])
+        )
         cv2.rectangle(img, (int(x), int(y)), (int(x + nw), int(y + nh)), paper, -1)
         text_block(img, rng, int(x + 6), int(y), int(x + nw - 6), int(y + nh - 5), (20, 20, 120))
         cv2.circle(img, (int(x + nw // 2), int(y + 8)), 6, (200, 20, 20), -1)
@@ -202,7 +213,9 @@ def whiteboard(rng: np.random.Generator, w: int = 1024, h: int = 512) -> np.ndar
     """A whiteboard: mostly blank, a few marker strokes."""
     img = np.full((h, w, 3), 246, np.uint8)
     for _ in range(rng.integers(2, 4)):
-        pts = np.cumsum(rng.normal(0, 12, size=(20, 2)), axis=0) + rng.integers(100, [w - 100, h - 100])
+        pts = np.cumsum(rng.normal(0, 12, size=(20, 2)), axis=0) + rng.integers(
+            100, [w - 100, h - 100]
+        )
         cv2.polylines(img, [pts.astype(np.int32)], False, (40, 60, 160), 3, cv2.LINE_AA)
     cv2.rectangle(img, (0, 0), (w - 1, h - 1), (170, 170, 175), 10)
     return img
@@ -251,8 +264,12 @@ def door(rng: np.random.Generator, w: int = 512, h: int = 1024) -> np.ndarray:
     """A wooden door with panels, a sign and a handle."""
     img = np.ascontiguousarray(np.rot90(wood(rng, max(w, h), light=False))[:h, :w]).copy()
     for y0, y1 in ((0.08, 0.45), (0.55, 0.92)):
-        cv2.rectangle(img, (int(w * 0.12), int(h * y0)), (int(w * 0.88), int(h * y1)), (55, 35, 20), 6)
-    cv2.rectangle(img, (int(w * 0.3), int(h * 0.25)), (int(w * 0.7), int(h * 0.32)), (235, 235, 225), -1)
+        cv2.rectangle(
+            img, (int(w * 0.12), int(h * y0)), (int(w * 0.88), int(h * y1)), (55, 35, 20), 6
+        )
+    cv2.rectangle(
+        img, (int(w * 0.3), int(h * 0.25)), (int(w * 0.7), int(h * 0.32)), (235, 235, 225), -1
+    )
     cv2.putText(
         img, f"ROOM {rng.integers(100, 999)}", (int(w * 0.32), int(h * 0.30)),
         cv2.FONT_HERSHEY_SIMPLEX, w / 700, (20, 20, 20), 2, cv2.LINE_AA,

@@ -45,8 +45,8 @@ class ObstacleMap:
     Attributes:
         origin: (2,) world xy of the centre of cell (0, 0).
         res: cell size (m).
-        occupied: (H, W) bool, True where geometry is inside the band (outside the scene's
-            bounding box counts as occupied).
+        occupied: (H, W) bool, True where geometry is inside the band, and everywhere not
+            connected to the largest free region (inside solids, outside the room).
         clearance: (H, W) float distance (m) from each cell to the nearest occupied cell.
         nearest: (2, H, W) int row/col index of that nearest occupied cell.
     """
@@ -76,12 +76,20 @@ class ObstacleMap:
             cv2.fillPoly(occ, [px], 1)
             cv2.polylines(occ, [px], True, 1, 1)
         # outside the scene's bounding box: not reachable
-        border = int(round(0.1 / res))
+        border = round(0.1 / res)
         occ[:border, :] = 1
         occ[-border:, :] = 1
         occ[:, :border] = 1
         occ[:, -border:] = 1
-        occupied = occ.astype(bool)
+        # Free cells not connected to the largest free region are enclosed: the inside of
+        # solids (a box whose top is above the band rasterizes as its outline only) or the
+        # outside of the room. Nothing can drive there: mark them occupied.
+        n, labels = cv2.connectedComponents((occ == 0).astype(np.uint8), connectivity=4)
+        if n > 1:
+            counts = np.bincount(labels[occ == 0].ravel(), minlength=n)
+            occupied = labels != int(np.argmax(counts))
+        else:
+            occupied = occ.astype(bool)
         dist, idx = ndimage.distance_transform_edt(~occupied, return_indices=True)
         return ObstacleMap(origin, res, occupied, dist * res, idx)
 

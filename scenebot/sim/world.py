@@ -68,10 +68,10 @@ class SimWorld:
             scene, noise_sigma=cam.noise_sigma, antialias=cam.antialias
         )
         fz = scene.floor_z
-        self.collision_map = ObstacleMap.build(
-            scene, fz + body.clearance_m, fz + body.height_m
+        self.collision_map = ObstacleMap.build(scene, fz + body.clearance_m, fz + body.height_m)
+        self.bumper_map = ObstacleMap.build(
+            scene, fz + sens.bumper_z_min_m, fz + sens.bumper_z_max_m
         )
-        self.bumper_map = ObstacleMap.build(scene, fz + sens.bumper_z_min_m, fz + sens.bumper_z_max_m)
         clearance = self.collision_map.clearance_at((start.x, start.y))
         if clearance < body.radius_m:
             raise StartPoseError(
@@ -79,7 +79,9 @@ class SimWorld:
                 f"in scene {scene.name!r} (clearance {clearance:.2f} m < robot radius "
                 f"{body.radius_m:.2f} m): set world.start in config.yaml to a free spot"
             )
-        self.params = WorldParams(body.wheel_radius_m, body.wheel_base_m, body.max_wheel_speed_deg_s)
+        self.params = WorldParams(
+            body.wheel_radius_m, body.wheel_base_m, body.max_wheel_speed_deg_s
+        )
         self.intrinsics = Intrinsics.from_hfov(cam.width, cam.height, cam.hfov_deg)
         self.t = 0.0
         self._pose = np.array([start.x, start.y, start.theta], np.float64)
@@ -95,7 +97,10 @@ class SimWorld:
     def set_wheel_speeds(self, left_deg_s: float, right_deg_s: float) -> None:
         """Command wheel speeds (deg/s); new slip factors are drawn for each new command."""
         limit = self.params.max_wheel_speed_deg_s
-        cmd = (float(np.clip(left_deg_s, -limit, limit)), float(np.clip(right_deg_s, -limit, limit)))
+        cmd = (
+            float(np.clip(left_deg_s, -limit, limit)),
+            float(np.clip(right_deg_s, -limit, limit)),
+        )
         if cmd != self._cmd and cmd != (0.0, 0.0):
             s = self.cfg.slip
             self._slip_drive = float(np.clip(self.rng.normal(s.drive, s.drive_noise), 0, 0.5))
@@ -105,7 +110,7 @@ class SimWorld:
 
     def step(self, dt: float) -> None:
         """Advance the physics by ``dt`` seconds (sub-stepped at ``cfg.dt_s``)."""
-        n = max(1, int(math.ceil(dt / self.cfg.dt_s - 1e-9)))
+        n = max(1, math.ceil(dt / self.cfg.dt_s - 1e-9))
         h = dt / n
         for _ in range(n):
             self._substep(h)
@@ -168,7 +173,11 @@ class SimWorld:
         x, y, th = self._pose
         fwd = self.cfg.body.radius_m - 0.02
         origin = np.array(
-            [x + fwd * math.cos(th), y + fwd * math.sin(th), self.scene.floor_z + s.ultrasonic_height_m]
+            [
+                x + fwd * math.cos(th),
+                y + fwd * math.sin(th),
+                self.scene.floor_z + s.ultrasonic_height_m,
+            ]
         )
         half = math.radians(s.ultrasonic_cone_deg) / 2
         az, el = np.meshgrid(np.linspace(-half, half, 9), np.linspace(-half / 2, half / 2, 3))

@@ -1,0 +1,54 @@
+# scenebot: the two set-up commands of the README, and helpers.
+#   make demo   install everything, run the default campaign (simulated office)
+#   make test   install everything, lint, run the tests (fast and slow; what CI runs)
+
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+CORES  ?= 2
+# Debian packages the project needs: libusb for open3d's import.
+APT_PACKAGES := libusb-1.0-0
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+export TI_SKIP_VERSION_CHECK := ON
+
+.PHONY: demo test test-fast lint format system install clean-results
+
+system:
+	@missing=""; for p in $(APT_PACKAGES); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	touch $@
+
+install: system $(VENV)/.installed
+
+demo: install
+	$(BIN)/snakemake --cores $(CORES)
+
+lint: install
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/snakefmt --check Snakefile rules/
+	$(BIN)/snakemake --lint
+
+test: lint
+	$(BIN)/python -m pytest -m "not hardware and not gpu"
+
+test-fast: install
+	$(BIN)/python -m pytest
+
+format: install
+	$(BIN)/ruff format .
+	$(BIN)/ruff check --fix .
+	$(BIN)/snakefmt Snakefile rules/
+
+clean-results:
+	@echo "results/ holds your photos: remove it by hand if you really mean to."
