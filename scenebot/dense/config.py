@@ -1,0 +1,124 @@
+"""Configuration of the dense multi-view stereo stage (issue 7).
+
+The lead merges :class:`DenseConfig` into the single project config; every field carries its
+unit in the description so the generated JSON schema documents itself.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class PatchMatchConfig(BaseModel):
+    """Settings of the taichi PatchMatch stereo (and of pycolmap's CUDA one where used)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    iterations: list[int] = Field(
+        [1, 1, 3, 3],
+        min_length=1,
+        max_length=6,
+        description="Red-black PatchMatch iterations per pyramid level, index 0 = full "
+        "resolution, each next level half the size; the coarsest starts from random planes.",
+    )
+    neighbors: list[Literal[4, 8]] = Field(
+        [4, 4, 8],
+        min_length=1,
+        description="Propagation candidates per pixel per level (4 at distance 1, plus 4 at "
+        "distance 3); levels beyond the list use its last entry.",
+    )
+    fine_view_selection: bool = Field(
+        True,
+        description="At full resolution evaluate only each pixel's top_k sources chosen for the "
+        "upsampled hypothesis (halves the work with top_k=2 of 4 sources).",
+    )
+    geom_iterations: int = Field(
+        1, ge=0, le=10, description="Geometric-consistency iterations at full resolution."
+    )
+    window_radius: int = Field(
+        3, ge=1, le=10, description="NCC window half size, pixels (window is 2r+1 wide)."
+    )
+    window_step: int = Field(2, ge=1, le=4, description="Sampling step inside the window, pixels.")
+    sigma_color: float = Field(
+        0.2, gt=0, description="Bilateral NCC colour sigma, grey levels in [0, 1]."
+    )
+    sigma_spatial: float = Field(
+        -1.0, description="Bilateral NCC spatial sigma, pixels; <= 0 means window_radius."
+    )
+    top_k: int = Field(
+        2, ge=1, le=8, description="View selection: the cost is the mean of the k best sources."
+    )
+    geom_weight: float = Field(
+        0.3, ge=0, description="Weight of the forward-backward reprojection error, per pixel."
+    )
+    geom_max_error: float = Field(
+        3.0, gt=0, description="Truncation of the forward-backward reprojection error, pixels."
+    )
+    filter_max_cost: float = Field(
+        0.5, gt=0, le=2, description="Keep a pixel if its photometric cost (1 - NCC) is below."
+    )
+    filter_min_consistent: int = Field(
+        1, ge=0, le=8, description="Keep a pixel if at least this many sources agree geometrically."
+    )
+    filter_max_reproj_error: float = Field(
+        1.0, gt=0, description="Forward-backward error for a source to agree, pixels."
+    )
+    filter_max_rel_depth_error: float = Field(
+        0.01, gt=0, description="Relative depth difference for a source to agree (fraction)."
+    )
+    seed: int = Field(0, description="Random seed of the hypothesis initialisation.")
+
+
+class DenseConfig(BaseModel):
+    """Settings of the dense stage: undistortion, view selection, depth estimation, fusion."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    max_image_size: int = Field(
+        640, ge=32, description="Longest side of the undistorted images, pixels (-1 not allowed)."
+    )
+    num_source_views: int = Field(4, ge=1, le=8, description="Source views per reference view.")
+    min_shared_points: int = Field(
+        10, ge=1, description="A source view must share at least this many sparse points."
+    )
+    min_triangulation_angle_deg: float = Field(
+        1.0, ge=0, description="Minimum median triangulation angle to a source view, degrees."
+    )
+    skip_isolated_views: bool = Field(
+        False,
+        description="Leave out (with a warning) views that share no usable overlap with any "
+        "other view instead of failing.",
+    )
+    max_views: int = Field(
+        0, ge=0, description="Reference views for which depth is computed (0 = all registered)."
+    )
+    depth_margin: float = Field(
+        0.25, ge=0, description="Depth range = sparse-point depth percentiles widened by this."
+    )
+    backend: Literal["auto", "taichi", "colmap_cuda"] = Field(
+        "auto",
+        description="Depth backend: auto uses pycolmap.patch_match_stereo when pycolmap has "
+        "CUDA, else the taichi PatchMatch.",
+    )
+    taichi_arch: Literal["auto", "cpu", "gpu"] = Field(
+        "auto", description="Taichi arch: auto tries CUDA, then Vulkan, then CPU."
+    )
+    num_threads: int = Field(-1, description="CPU threads for taichi and fusion (-1 = all).")
+    patchmatch: PatchMatchConfig = Field(default_factory=PatchMatchConfig)
+    fusion_min_num_pixels: int = Field(
+        3, ge=1, description="Fusion: minimum consistent pixels for a fused point."
+    )
+    fusion_max_reproj_error: float = Field(
+        2.0, gt=0, description="Fusion: maximum reprojection error, pixels."
+    )
+    fusion_max_depth_error: float = Field(
+        0.01, gt=0, description="Fusion: maximum relative depth error (fraction)."
+    )
+    fusion_max_normal_error_deg: float = Field(
+        10.0, gt=0, description="Fusion: maximum normal angle difference, degrees."
+    )
+    poisson_mesh: bool = Field(False, description="Also write a Poisson mesh of the fused cloud.")
+    poisson_depth: int = Field(9, ge=5, le=12, description="Octree depth of the Poisson mesh.")
+    plots: bool = Field(True, description="Write renders of the cloud and a depth/normal mosaic.")

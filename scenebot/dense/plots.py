@@ -1,0 +1,150 @@
+"""Pictures of the dense stage: renders of the fused cloud and a depth/normal mosaic."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import open3d as o3d
+import pycolmap
+
+from scenebot.dense import workspace as ws
+
+
+def splat(
+    points: np.ndarray,
+    colors: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    width: int,
+    height: int,
+    radius: int = 1,
+) -> np.ndarray:
+    """Z-buffered point splatting.
+
+    Args:
+        points: (N, 3) world points, metres.
+        colors: (N, 3) RGB in [0, 1].
+        K: (3, 3) intrinsics, pixels.
+        R: (3, 3) cam_from_world rotation.
+        t: (3,) cam_from_world translation.
+        width: image width, pixels.
+        height: image height, pixels.
+        radius: splat half size, pixels.
+
+    Returns:
+        (height, width, 3) float image, white background.
+    """
+    pc = points @ R.T + t
+    keep = pc[:, 2] > 0.05
+    pc, col = pc[keep], colors[keep]
+    uv = (pc @ K.T)[:, :2] / pc[:, 2:3]
+    u = np.floor(uv[:, 0]).astype(int)
+    v = np.floor(uv[:, 1]).astype(int)
+    order = np.argsort(-pc[:, 2])  # far first, near last (last write wins)
+    img = np.ones((height, width, 3))
+    zbuf = np.full((height, width), np.inf)
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            uu, vv = u[order] + dx, v[order] + dy
+            ok = (uu >= 0) & (uu < width) & (vv >= 0) & (vv < height)
+            uu, vv, zz, cc = uu[ok], vv[ok], pc[order, 2][ok], col[order][ok]
+            closer = zz < zbuf[vv, uu] + 0.02  # within-pass order already near-last
+            img[vv[closer], uu[closer]] = cc[closer]
+            np.minimum.at(zbuf, (vv[closer], uu[closer]), zz[closer])
+    return img
+
+
+def plot_fused_views(
+    ply: str | Path, rec: pycolmap.Reconstruction, out: str | Path, num_views: int = 3
+) -> None:
+    """Render the fused cloud from a top view and from a few registered cameras (pulled back
+    0.5 m), side by side, into a PNG.
+
+    Args:
+        ply: fused point cloud.
+        rec: (undistorted) reconstruction, for the viewpoints.
+        out: PNG path.
+        num_views: perspective renders besides the top view.
+    """
+    pcd = o3d.io.read_point_cloud(str(ply))
+    pts = np.asarray(pcd.points)
+    cols = np.asarray(pcd.colors) if pcd.has_colors() else np.full((len(pts), 3), 0.3)
+    ids = sorted(rec.reg_image_ids())
+    picks = [ids[int(k)] for k in np.linspace(0, len(ids) - 1, num_views).round()]
+    fig, axes = plt.subplots(1, num_views + 1, figsize=(4.2 * (num_views + 1), 3.6))
+    ax = axes[0]
+    if len(pts):
+        order = np.argsort(pts[:, 2])
+        ax.scatter(pts[order, 0], pts[order, 1], c=cols[order], s=0.2, marker=".", linewidths=0)
+    centers = np.array([rec.image(i).projection_center() for i in ids])
+    ax.plot(centers[:, 0], centers[:, 1], "r.", ms=3, label="cameras")
+    ax.set_aspect("equal")
+    ax.set_title(f"top view, {len(pts)} points")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="lower right", fontsize=7)
+    for ax, i in zip(axes[1:], picks, strict=True):
+        img = rec.image(i)
+        cam = rec.camera(img.camera_id)
+        scale = 320.0 / max(cam.width, cam.height)
+        w, h = round(cam.width * scale), round(cam.height * scale)
+        K = cam.calibration_matrix().copy()
+        K[:2] *= scale
+        pose = img.cam_from_world()
+        R = pose.rotation.matrix()
+        t = np.asarray(pose.translation) + np.array([0.0, 0.0, 0.5])  # step back 0.5 m
+        ax.imshow(splat(pts, cols, K, R, t, w, h))
+        ax.set_title(f"from {Path(img.name).name} (-0.5 m)")
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(str(out), dpi=110)
+    plt.close(fig)
+
+
+def normal_to_rgb(normal: np.ndarray) -> np.ndarray:
+    """(H, W, 3) camera-frame normals -> RGB in [0, 1] (0 normals -> white)."""
+    rgb = 0.5 - 0.5 * normal
+    rgb[np.all(normal == 0, axis=-1)] = 1.0
+    return np.clip(rgb, 0, 1)
+
+
+def plot_depth_mosaic(
+    dense_dir: str | Path, names: list[str], out: str | Path, max_rows: int = 4
+) -> None:
+    """Mosaic of image | depth | normal for a few views of the workspace.
+
+    Args:
+        dense_dir: dense workspace with geometric maps.
+        names: view names with maps.
+        out: PNG path.
+        max_rows: number of views shown (evenly spaced).
+    """
+    dense_dir = Path(dense_dir)
+    if not names:
+        raise ValueError("plot_depth_mosaic: no view to show")
+    pick = [names[int(k)] for k in np.linspace(0, len(names) - 1, min(max_rows, len(names)))]
+    fig, axes = plt.subplots(len(pick), 3, figsize=(12, 3.2 * len(pick)), squeeze=False)
+    for row, name in zip(axes, pick, strict=True):
+        bgr = cv2.imread(str(dense_dir / "images" / name))
+        depth, normal = ws.read_maps(dense_dir, name, "geometric")
+        valid = depth > 0
+        row[0].imshow(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        row[0].set_title(Path(name).name)
+        dm = np.where(valid, depth, np.nan)
+        im = row[1].imshow(dm, cmap="turbo")
+        row[1].set_title(f"depth [m], {100 * valid.mean():.0f}% of pixels")
+        fig.colorbar(im, ax=row[1], fraction=0.035)
+        row[2].imshow(normal_to_rgb(normal))
+        row[2].set_title("normal (camera frame)")
+        for a in row:
+            a.axis("off")
+    fig.tight_layout()
+    fig.savefig(str(out), dpi=90)
+    plt.close(fig)

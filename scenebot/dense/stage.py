@@ -1,0 +1,304 @@
+"""The dense stage: sparse map + photos -> COLMAP dense workspace, depth maps, fused cloud.
+
+Entry point :func:`run`. Writes under ``outputs.dense_dir`` (``results/{scene}/final/dense``):
+
+* the COLMAP dense workspace (``images/``, ``sparse/``, ``stereo/``), depth and normal maps in
+  COLMAP format (``*.photometric.bin`` unfiltered, ``*.geometric.bin`` after the geometric
+  pass and the filter; pycolmap's fusion reads the latter),
+* ``fused.ply`` (+ ``fused.ply.vis``) from ``pycolmap.stereo_fusion`` (runs on CPU),
+* optionally ``meshed-poisson.ply``,
+* ``dense_summary.json`` (backend, per-view sources, depth ranges, coverage, timings),
+* with ``plots``: ``fused_views.png`` and ``depth_normal_mosaic.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from scenebot.dense import workspace as ws
+from scenebot.dense.colmap_io import read_array, write_array
+from scenebot.dense.config import DenseConfig
+from scenebot.dense.patchmatch import DepthResult, PatchMatchSolver, StereoView, init_taichi
+from scenebot.dense.views import ViewPlan, select_views
+
+LOG = logging.getLogger(__name__)
+
+
+@dataclass
+class DenseInputs:
+    """Inputs of the dense stage.
+
+    Attributes:
+        sparse_dir: COLMAP binary model of the last round (``results/{scene}/round_{r}/sfm``).
+        image_dir: folder holding every registered photo under its model name.
+    """
+
+    sparse_dir: Path
+    image_dir: Path
+
+
+@dataclass
+class DenseOutputs:
+    """Outputs of the dense stage.
+
+    Attributes:
+        dense_dir: workspace folder (``results/{scene}/final/dense``).
+    """
+
+    dense_dir: Path
+
+    @property
+    def fused_ply(self) -> Path:
+        return Path(self.dense_dir) / "fused.ply"
+
+    @property
+    def summary_json(self) -> Path:
+        return Path(self.dense_dir) / "dense_summary.json"
+
+
+def choose_backend(cfg: DenseConfig) -> str:
+    """``colmap_cuda`` when asked for (or auto) and pycolmap has CUDA, else ``taichi``.
+
+    Raises:
+        RuntimeError: ``backend: colmap_cuda`` but this pycolmap has no CUDA.
+    """
+    if cfg.backend == "colmap_cuda" and not pycolmap.has_cuda:
+        raise RuntimeError(
+            "dense.backend is colmap_cuda but the installed pycolmap has no CUDA "
+            "(pycolmap.has_cuda is False): install a CUDA build of pycolmap or set "
+            "dense.backend to auto/taichi"
+        )
+    if cfg.backend in ("auto", "colmap_cuda") and pycolmap.has_cuda:
+        return "colmap_cuda"
+    return "taichi"
+
+
+def _subsample(plans: list[ViewPlan], max_views: int) -> list[ViewPlan]:
+    if max_views <= 0 or len(plans) <= max_views:
+        return plans
+    idx = np.unique(np.round(np.linspace(0, len(plans) - 1, max_views)).astype(int))
+    return [plans[i] for i in idx]
+
+
+def _run_taichi(
+    cfg: DenseConfig, rec: pycolmap.Reconstruction, plans: list[ViewPlan], dense_dir: Path
+) -> list[dict]:
+    """Photometric pass, geometric pass and filter for every planned view."""
+    arch = init_taichi(cfg.taichi_arch, cfg.num_threads, cfg.patchmatch.seed)
+    LOG.info("dense: taichi PatchMatch on %s, %d views", arch, len(plans))
+    solver = PatchMatchSolver(cfg.patchmatch)
+    cache: dict[int, StereoView] = {}
+
+    def view(i: int) -> StereoView:
+        if i not in cache:
+            cache[i] = ws.load_view(rec, i, dense_dir)
+        return cache[i]
+
+    planned = {p.image_id for p in plans}
+    stats = {p.image_id: {"name": p.name} for p in plans}
+
+    def src_depths(p: ViewPlan, stage: str, saved: Path | None = None) -> list[np.ndarray]:
+        out = []
+        for s in p.sources:
+            name = rec.image(s).name
+            if saved is not None and (saved / f"{name}.bin").is_file():
+                out.append(read_array(saved / f"{name}.bin"))
+            elif s in planned:
+                out.append(ws.read_maps(dense_dir, name, stage)[0])
+            else:  # a source without depth of its own: no geometric evidence
+                out.append(np.zeros_like(view(s).gray))
+        return out
+
+    for p in plans:  # photometric pass
+        t0 = time.perf_counter()
+        res = solver.estimate(view(p.image_id), [view(s) for s in p.sources], p.depth_range)
+        stats[p.image_id]["photometric_s"] = time.perf_counter() - t0
+        ws.write_maps(dense_dir, p.name, "photometric", res.depth, res.normal)
+        write_array(ws.map_path(dense_dir, "cost", p.name, "photometric"), res.photo)
+    for p in plans:  # geometric pass, against the sources' photometric maps
+        t0 = time.perf_counter()
+        d0, n0 = ws.read_maps(dense_dir, p.name, "photometric")
+        if cfg.patchmatch.geom_iterations > 0:
+            res = solver.estimate(
+                view(p.image_id),
+                [view(s) for s in p.sources],
+                p.depth_range,
+                src_depths=src_depths(p, "photometric"),
+                init=(d0, n0),
+            )
+        else:  # no geometric pass: filter the photometric maps
+            photo = read_array(ws.map_path(dense_dir, "cost", p.name, "photometric"))
+            res = DepthResult(d0, n0, photo, photo)
+        stats[p.image_id]["geometric_s"] = time.perf_counter() - t0
+        # unfiltered geometric maps, so the filter can see every source's estimate
+        ws.write_maps(dense_dir, p.name, "geometric", res.depth, res.normal)
+        write_array(ws.map_path(dense_dir, "cost", p.name, "geometric"), res.photo)
+    # filter: photometric cost and agreement with the sources' (unfiltered) geometric maps;
+    # all unfiltered maps are read before any is overwritten by its filtered version
+    unfiltered = dense_dir / "stereo" / "unfiltered"
+    for p in plans:
+        t0 = time.perf_counter()
+        d, n = ws.read_maps(dense_dir, p.name, "geometric")
+        photo = read_array(ws.map_path(dense_dir, "cost", p.name, "geometric"))
+        res = solver.filter(
+            view(p.image_id),
+            [view(s) for s in p.sources],
+            DepthResult(d, n, photo, photo),
+            src_depths(p, "geometric", unfiltered),
+        )
+        stats[p.image_id]["filter_s"] = time.perf_counter() - t0
+        stats[p.image_id]["fraction_with_depth"] = float(np.mean(res.depth > 0))
+        # keep the unfiltered depth for the views that still use it as a source
+        write_array(unfiltered / f"{p.name}.bin", d)
+        ws.write_maps(dense_dir, p.name, "geometric", res.depth, res.normal)
+    shutil.rmtree(unfiltered, ignore_errors=True)
+    return [stats[p.image_id] for p in plans]
+
+
+def _run_colmap_cuda(cfg: DenseConfig, plans: list[ViewPlan], dense_dir: Path) -> list[dict]:
+    """pycolmap.patch_match_stereo (CUDA) with the same sources and depth ranges."""
+    opts = pycolmap.PatchMatchOptions()
+    opts.max_image_size = cfg.max_image_size
+    opts.window_radius = max(cfg.patchmatch.window_radius, 3)
+    opts.geom_consistency = cfg.patchmatch.geom_iterations > 0
+    opts.filter = True
+    opts.filter_min_num_consistent = max(cfg.patchmatch.filter_min_consistent, 1)
+    opts.num_threads = cfg.num_threads
+    t0 = time.perf_counter()
+    pycolmap.patch_match_stereo(str(dense_dir), options=opts)
+    per_view = (time.perf_counter() - t0) / max(len(plans), 1)
+    return [{"name": p.name, "colmap_cuda_s": per_view} for p in plans]
+
+
+def fuse(cfg: DenseConfig, dense_dir: Path) -> pycolmap.Reconstruction:
+    """pycolmap.stereo_fusion of the geometric maps into ``fused.ply``.
+
+    Raises:
+        RuntimeError: fusion produced no point (names the settings to relax).
+    """
+    opts = pycolmap.StereoFusionOptions()
+    opts.num_threads = cfg.num_threads
+    opts.min_num_pixels = cfg.fusion_min_num_pixels
+    opts.max_reproj_error = cfg.fusion_max_reproj_error
+    opts.max_depth_error = cfg.fusion_max_depth_error
+    opts.max_normal_error = cfg.fusion_max_normal_error_deg
+    opts.max_image_size = cfg.max_image_size
+    fused = pycolmap.stereo_fusion(
+        str(dense_dir / "fused.ply"),
+        str(dense_dir),
+        workspace_format="COLMAP",
+        input_type="geometric",
+        options=opts,
+        output_type="PLY",
+    )
+    if fused.num_points3D() == 0:
+        raise RuntimeError(
+            f"dense: stereo fusion in {dense_dir} produced no point; check the depth maps in "
+            "stereo/depth_maps or relax dense.fusion_min_num_pixels / fusion_max_*_error"
+        )
+    return fused
+
+
+def poisson_mesh(ply: Path, out: Path, depth: int) -> None:
+    """Screened Poisson mesh of the fused cloud (open3d), low-density vertices trimmed."""
+    import open3d as o3d
+
+    pcd = o3d.io.read_point_cloud(str(ply))
+    if not pcd.has_normals():
+        pcd.estimate_normals()
+    mesh, dens = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=depth)
+    dens = np.asarray(dens)
+    mesh.remove_vertices_by_mask(dens < np.quantile(dens, 0.05))
+    o3d.io.write_triangle_mesh(str(out), mesh)
+
+
+def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
+    """Run dense MVS on the final map.
+
+    Args:
+        cfg: dense settings.
+        inputs: sparse model and photo folder.
+        outputs: dense workspace folder.
+
+    Returns:
+        The summary written to ``dense_summary.json``.
+
+    Raises:
+        FileNotFoundError: model files or registered photos missing (named in the message).
+        ValueError: fewer than 2 registered views, or views without any overlapping view
+            (named) when ``skip_isolated_views`` is false.
+    """
+    t_start = time.perf_counter()
+    dense_dir = Path(outputs.dense_dir)
+    ws.check_inputs(inputs.sparse_dir, inputs.image_dir)
+    rec = ws.undistort(inputs.sparse_dir, inputs.image_dir, dense_dir, cfg.max_image_size)
+    plans, isolated = select_views(
+        rec,
+        num_sources=cfg.num_source_views,
+        min_shared_points=cfg.min_shared_points,
+        min_angle_deg=cfg.min_triangulation_angle_deg,
+        depth_margin=cfg.depth_margin,
+    )
+    if isolated and (not cfg.skip_isolated_views or not plans):
+        raise ValueError(
+            f"dense: {len(isolated)} view(s) share no usable overlap (>= {cfg.min_shared_points}"
+            f" sparse points at >= {cfg.min_triangulation_angle_deg} deg) with any other view: "
+            + ", ".join(isolated[:10])
+            + (" ..." if len(isolated) > 10 else "")
+            + "; set dense.skip_isolated_views: true to leave them out, or lower "
+            "dense.min_shared_points / dense.min_triangulation_angle_deg"
+        )
+    for name in isolated:
+        LOG.warning("dense: view %s has no overlapping view, skipped", name)
+    plans = _subsample(plans, cfg.max_views)
+    ws.write_configs(dense_dir, {p.name: [rec.image(s).name for s in p.sources] for p in plans})
+    backend = choose_backend(cfg)
+    t0 = time.perf_counter()
+    if backend == "colmap_cuda":
+        view_stats = _run_colmap_cuda(cfg, plans, dense_dir)
+    else:
+        view_stats = _run_taichi(cfg, rec, plans, dense_dir)
+    t_depth = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    fused = fuse(cfg, dense_dir)
+    t_fusion = time.perf_counter() - t0
+    if cfg.poisson_mesh:
+        poisson_mesh(outputs.fused_ply, dense_dir / "meshed-poisson.ply", cfg.poisson_depth)
+    for p, st in zip(plans, view_stats, strict=True):
+        st.update(
+            sources=[rec.image(s).name for s in p.sources],
+            shared_points=p.shared_points,
+            median_angle_deg=[round(a, 2) for a in p.median_angle_deg],
+            depth_range=list(p.depth_range),
+        )
+    summary = {
+        "backend": backend,
+        "taichi_arch": None if backend != "taichi" else init_taichi(),
+        "num_views": len(plans),
+        "skipped_views": isolated,
+        "image_size": [rec.camera(rec.image(plans[0].image_id).camera_id).width,
+                       rec.camera(rec.image(plans[0].image_id).camera_id).height],
+        "num_fused_points": int(fused.num_points3D()),
+        "depth_seconds": t_depth,
+        "fusion_seconds": t_fusion,
+        "total_seconds": time.perf_counter() - t_start,
+        "config": cfg.model_dump(),
+        "views": view_stats,
+    }  # fmt: skip
+    if cfg.plots:
+        from scenebot.dense import plots
+
+        plots.plot_fused_views(outputs.fused_ply, rec, dense_dir / "fused_views.png")
+        plots.plot_depth_mosaic(
+            dense_dir, [p.name for p in plans], dense_dir / "depth_normal_mosaic.png"
+        )
+    outputs.summary_json.write_text(json.dumps(summary, indent=1))
+    return summary

@@ -1,0 +1,488 @@
+"""Path following with visual localization (paper section IV.B, "Path-Following").
+
+The robot keeps a target node of its path and switches to the next node when it comes within
+``node_reached_m`` of it. Between visual fixes the pose is dead-reckoned from odometry
+*relative to the last fix* (so the odometry frame's origin never matters); a photo is
+localized at every node, after every large turn (slip happens mostly on turns) and after every
+``localize_every_m`` of driving. When a bumper or a stall stops the robot, it backs up, drives
+a short distance off the path, marks the obstacle on its planner and plans a new path; at the
+``max_obstacles``-th obstacle it gives up on the goal, logging why. A photo that does not
+localize (too few matches or inliers, or a pose that is not that of a level camera on the
+robot) leaves the odometry estimate in charge; the next motion is followed by another attempt,
+and at the goal the robot turns in place to look elsewhere before retrying. A fix that jumps
+far from the odometry prediction (repeated textures can give confident wrong poses) is
+rejected unless the next fix agrees with it (``gate_m``, ``gate_deg``).
+
+Everything runs against :class:`scenebot.robot.base.Robot` and :class:`Camera`; localization
+and planning are injected callables, so the same code runs on the simulator and on hardware.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from scenebot.capturelog import CaptureLog
+from scenebot.localize.localize import FailureReason, LocalizationFailure, PoseEstimate
+from scenebot.plan.path import PlanFailure, PlannedPath
+from scenebot.robot.base import Camera, MotionResult, MotionStatus, Pose2D, Robot, wrap_angle
+
+
+class FollowConfig(BaseModel):
+    """Settings of path following."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    node_reached_m: float = Field(
+        0.15, gt=0, description="Switch to the next path node within this distance (m)."
+    )
+    goal_reached_m: float = Field(
+        0.05, gt=0, description="The goal is reached within this distance (m) of a visual fix."
+    )
+    localize_every_m: float = Field(
+        0.5, gt=0, description="Longest drive (m) between visual localizations."
+    )
+    localize_after_turn_deg: float = Field(
+        20.0, ge=0, description="Localize after a turn larger than this (deg)."
+    )
+    min_turn_deg: float = Field(
+        2.0, ge=0, description="Heading errors below this (deg) are not corrected."
+    )
+    max_obstacles: int = Field(
+        5, ge=1, description="Give up on a goal at this many bumps/stalls (the paper's k)."
+    )
+    backup_m: float = Field(0.12, gt=0, description="Back up this far (m) after a bump/stall.")
+    sidestep_m: float = Field(
+        0.25,
+        ge=0,
+        description="Then drive this far (m) off the path, at 90 deg, before replanning.",
+    )
+    obstacle_radius_m: float = Field(
+        0.35,
+        ge=0,
+        description="A bump marks a disk of this radius (m) on the planner's grid as an "
+        "obstacle: the unseen object's likely extent plus the robot's radius.",
+    )
+    contact_distance_m: float = Field(
+        0.25, ge=0, description="Distance (m) ahead of the robot's axis where a bump is marked."
+    )
+    max_localize_retries: int = Field(
+        4, ge=0, description="Failed localizations at the goal before accepting odometry."
+    )
+    retry_turn_deg: float = Field(
+        40.0,
+        ge=0,
+        description="Before retrying a failed localization at the goal, turn in place to "
+        "headings +a, -a, +2a, -2a ... (deg) around the arrival heading (a different view); "
+        "0: back up retry_move_m instead.",
+    )
+    retry_move_m: float = Field(
+        0.08, gt=0, description="Back-up distance (m) before a retry when retry_turn_deg is 0."
+    )
+    max_motions: int = Field(
+        120, ge=1, description="Motion commands per goal at most (then the goal is abandoned)."
+    )
+    camera_forward_m: float = Field(
+        0.1, description="Camera centre ahead of the robot's rotation axis (m)."
+    )
+    camera_left_m: float = Field(
+        0.0, description="Camera centre left of the robot's rotation axis (m)."
+    )
+    gate_m: float = Field(
+        0.5,
+        ge=0,
+        description="A fix farther than gate_m + gate_per_m * (distance driven since the last "
+        "fix) from the odometry prediction is rejected (repeated textures can give confident "
+        "wrong poses), unless the next fix agrees with it.",
+    )
+    gate_per_m: float = Field(0.25, ge=0, description="See gate_m (m per m driven).")
+    gate_deg: float = Field(
+        25.0, ge=0, description="A fix whose heading differs more (deg) from odometry is rejected."
+    )
+    turn_to_goal_heading: bool = Field(
+        True, description="At the goal, turn to the goal's heading when it has one."
+    )
+
+
+Localizer = Callable[[Path], PoseEstimate | LocalizationFailure]
+Planner = Callable[[np.ndarray, np.ndarray], PlannedPath | PlanFailure]
+
+
+def robot_pose_from_camera(est: PoseEstimate, forward_m: float, left_m: float) -> Pose2D:
+    """The robot's planar pose (rotation axis, heading) from a camera pose estimate."""
+    c = est.center
+    th = est.heading
+    x = c[0] - forward_m * math.cos(th) + left_m * math.sin(th)
+    y = c[1] - forward_m * math.sin(th) - left_m * math.cos(th)
+    return Pose2D(float(x), float(y), th % (2 * math.pi))
+
+
+def compose_odometry(fix: Pose2D, odo_at_fix: Pose2D, odo_now: Pose2D) -> Pose2D:
+    """Map pose now = the fix composed with the odometry motion since the fix.
+
+    Args:
+        fix: map-frame pose at the fix.
+        odo_at_fix: odometry reading at the fix.
+        odo_now: odometry reading now.
+    """
+    dx, dy = odo_now.x - odo_at_fix.x, odo_now.y - odo_at_fix.y
+    c, s = math.cos(odo_at_fix.theta), math.sin(odo_at_fix.theta)
+    fwd, left = c * dx + s * dy, -s * dx + c * dy  # motion in the body frame at the fix
+    cf, sf = math.cos(fix.theta), math.sin(fix.theta)
+    dth = wrap_angle(odo_now.theta - odo_at_fix.theta)
+    return Pose2D(
+        fix.x + cf * fwd - sf * left,
+        fix.y + sf * fwd + cf * left,
+        (fix.theta + dth) % (2 * math.pi),
+    )
+
+
+@dataclass
+class FollowResult:
+    """The outcome of going to one goal.
+
+    Attributes:
+        reached: the goal was reached within ``goal_reached_m`` (by a visual fix, or by
+            odometry when ``localized_at_goal`` is False).
+        reason: ``"reached"`` or why the goal was abandoned.
+        pose: final estimated map pose.
+        distance_m: estimated distance from the goal at the end (m).
+        obstacles: bumps/stalls met.
+        localizations: successful visual fixes; ``failed_localizations``: failed ones.
+        localized_at_goal: the final pose comes from a fix taken at the goal.
+        motions: motion commands issued.
+        replans: paths planned after obstacles.
+    """
+
+    reached: bool
+    reason: str
+    pose: Pose2D
+    distance_m: float
+    obstacles: int = 0
+    localizations: int = 0
+    failed_localizations: int = 0
+    localized_at_goal: bool = False
+    motions: int = 0
+    replans: int = 0
+    events: list = field(default_factory=list)
+
+    def as_record(self) -> dict:
+        return {
+            "reached": self.reached,
+            "reason": self.reason,
+            "pose": self.pose.as_dict(),
+            "distance_m": self.distance_m,
+            "obstacles": self.obstacles,
+            "localizations": self.localizations,
+            "failed_localizations": self.failed_localizations,
+            "localized_at_goal": self.localized_at_goal,
+            "motions": self.motions,
+            "replans": self.replans,
+        }
+
+
+class _GiveUp(Exception):
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class PathFollower:
+    """Drives a robot along planned paths, localizing visually (see the module docstring).
+
+    Args:
+        robot: the robot.
+        camera: its camera.
+        localizer: photo path -> pose estimate or failure (e.g. a closure over
+            :func:`scenebot.localize.localize` and a loaded map).
+        planner: (start_xy, goal_xy) -> path or failure; if it has ``mark_obstacle(xy, r)``
+            (:class:`scenebot.plan.path.GridPlanner`), bumps are marked on its grid.
+        cfg: follow settings.
+        photo_dir: where localization photos are written.
+        log: capture log for events (optional).
+        truth: simulator only: returns the true pose record for the log (never used to
+            decide anything).
+        initial_pose: map pose to assume until the first successful fix.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        camera: Camera,
+        localizer: Localizer,
+        planner: Planner,
+        cfg: FollowConfig | None = None,
+        photo_dir: Path = Path("nav"),
+        log: CaptureLog | None = None,
+        truth: Callable[[], dict] | None = None,
+        initial_pose: Pose2D | None = None,
+    ):
+        self.robot = robot
+        self.camera = camera
+        self.localizer = localizer
+        self.planner = planner
+        self.cfg = cfg or FollowConfig()
+        self.photo_dir = Path(photo_dir)
+        self.log = log
+        self.truth = truth
+        odo = robot.sense().odometry
+        self._fix = initial_pose or odo
+        self._odo_at_fix = odo
+        self._since_fix_m = math.inf if initial_pose is None else 0.0
+        self._photo_count = 0
+        self._rejected: tuple[Pose2D, Pose2D] | None = None  # (fix, odometry) last rejected
+        self._goal_index = 0
+        self._result: FollowResult | None = None
+
+    # ------------------------------------------------------------------ state
+    @property
+    def pose(self) -> Pose2D:
+        """Current map pose estimate (last fix + odometry since)."""
+        return compose_odometry(self._fix, self._odo_at_fix, self.robot.sense().odometry)
+
+    def _event(self, event: str, **fields) -> None:
+        rec = {
+            "type": "event",
+            "t": self.robot.now,
+            "event": event,
+            "goal_index": self._goal_index,
+            "odometry": self.robot.sense().odometry.as_dict(),
+            "estimate": self.pose.as_dict(),
+            **fields,
+        }
+        if self.truth is not None:
+            rec["truth"] = self.truth()
+        if self._result is not None:
+            self._result.events.append(rec)
+        if self.log is not None:
+            self.log.write(rec)
+
+    def localize_now(self) -> PoseEstimate | LocalizationFailure:
+        """Take a photo and localize it; on success it becomes the new fix."""
+        dest = self.photo_dir / f"nav_g{self._goal_index:03d}_{self._photo_count:04d}.jpg"
+        self._photo_count += 1
+        odo = self.robot.sense().odometry
+        path = self.camera.capture(dest)
+        est = self.localizer(path)
+        res = self._result
+        if est.ok:
+            cand = robot_pose_from_camera(est, self.cfg.camera_forward_m, self.cfg.camera_left_m)
+            if not self._consistent(cand, odo):
+                self._rejected = (cand, odo)
+                if res is not None:
+                    res.failed_localizations += 1
+                self._event(
+                    "localize_rejected",
+                    image=str(path),
+                    reason=str(FailureReason.INCONSISTENT_WITH_ODOMETRY),
+                    candidate=cand.as_dict(),
+                    localization=est.as_record(),
+                )
+                return LocalizationFailure(
+                    FailureReason.INCONSISTENT_WITH_ODOMETRY,
+                    est.num_features,
+                    est.num_matches,
+                    est.num_inliers,
+                    est.timings_s,
+                )
+            self._rejected = None
+            self._fix = cand
+            self._odo_at_fix = odo
+            self._since_fix_m = 0.0
+            if res is not None:
+                res.localizations += 1
+            self._event("localize", image=str(path), localization=est.as_record())
+        else:
+            if res is not None:
+                res.failed_localizations += 1
+            self._event("localize_failed", image=str(path), localization=est.as_record())
+        return est
+
+    def _consistent(self, cand: Pose2D, odo: Pose2D) -> bool:
+        """Whether a fix agrees with the odometry prediction, or with the last rejected fix
+        carried forward by odometry (two agreeing fixes override the prediction)."""
+        cfg = self.cfg
+        allowed = cfg.gate_m + cfg.gate_per_m * self._since_fix_m
+        if not math.isfinite(allowed):
+            return True  # no prior yet: nothing to check against
+
+        def close(a: Pose2D, b: Pose2D, tol_m: float) -> bool:
+            dth = abs(math.degrees(wrap_angle(a.theta - b.theta)))
+            return math.hypot(a.x - b.x, a.y - b.y) <= tol_m and dth <= cfg.gate_deg
+
+        if close(cand, compose_odometry(self._fix, self._odo_at_fix, odo), allowed):
+            return True
+        if self._rejected is not None:
+            prev, prev_odo = self._rejected
+            return close(cand, compose_odometry(prev, prev_odo, odo), cfg.gate_m)
+        return False
+
+    def _motion(self, kind: str, amount: float) -> MotionResult:
+        res = self._result
+        if res is not None:
+            res.motions += 1
+            if res.motions > self.cfg.max_motions:
+                raise _GiveUp(f"more than {self.cfg.max_motions} motion commands for this goal")
+        r = self.robot.drive(amount) if kind == "drive" else self.robot.turn(amount)
+        if kind == "drive":
+            self._since_fix_m += abs(r.distance_m)
+        if r.status is MotionStatus.LINK_LOST:
+            raise _GiveUp("link to the robot lost during a motion")
+        return r
+
+    # ------------------------------------------------------------------ obstacles
+    def _handle_obstacle(self, r: MotionResult, goal_xy: np.ndarray) -> PlannedPath:
+        res = self._result
+        assert res is not None
+        res.obstacles += 1
+        p = self.pose
+        contact = np.array(
+            [
+                p.x + self.cfg.contact_distance_m * math.cos(p.theta),
+                p.y + self.cfg.contact_distance_m * math.sin(p.theta),
+            ]
+        )
+        self._event("obstacle", status=str(r.status), bumper=r.bumper, count=res.obstacles)
+        if res.obstacles >= self.cfg.max_obstacles:
+            raise _GiveUp(
+                f"{res.obstacles} obstacles met on the way (max_obstacles = "
+                f"{self.cfg.max_obstacles}): the map cannot route to this goal"
+            )
+        mark = getattr(self.planner, "mark_obstacle", None)
+        if mark is not None:
+            mark(contact, self.cfg.obstacle_radius_m)
+        # Back up, then drive a short distance off the path (alternating sides).
+        self._motion("drive", -self.cfg.backup_m)
+        side = 1.0 if res.obstacles % 2 else -1.0
+        if self.cfg.sidestep_m > 0:
+            self._motion("turn", side * math.pi / 2)
+            self._motion("drive", self.cfg.sidestep_m)  # a bump here is met again later
+        self.localize_now()
+        plan = self.planner(np.array([self.pose.x, self.pose.y]), goal_xy)
+        res.replans += 1
+        if isinstance(plan, PlanFailure):
+            raise _GiveUp(f"replanning failed: {plan.message}")
+        self._event("replan", waypoints=plan.waypoints_xy.tolist())
+        return plan
+
+    # ------------------------------------------------------------------ main loop
+    def follow(
+        self,
+        path_xy: np.ndarray,
+        goal_theta: float | None = None,
+        goal_index: int = 0,
+    ) -> FollowResult:
+        """Follow ``path_xy`` (M, 2) (m, map frame) to its last node.
+
+        Args:
+            path_xy: waypoints; the first is the planned start (skipped), the last the goal.
+            goal_theta: heading (rad) to turn to at the goal, if any.
+            goal_index: index of the goal, for photo names and log events.
+
+        Returns:
+            The outcome (never raises for bumps, stalls or failed localizations).
+        """
+        cfg = self.cfg
+        path = np.asarray(path_xy, float).reshape(-1, 2)
+        goal = path[-1].copy()
+        self._goal_index = goal_index
+        res = self._result = FollowResult(False, "", self.pose, math.inf)
+        self._event("follow_start", goal=goal.tolist(), waypoints=path.tolist())
+        retries = 0
+        try:
+            if self._since_fix_m > 0:
+                self.localize_now()
+            target = 1 if len(path) > 1 else 0
+            while True:
+                p = self.pose
+                here = np.array([p.x, p.y])
+                while (
+                    target < len(path) - 1 and np.hypot(*(path[target] - here)) < cfg.node_reached_m
+                ):
+                    target += 1
+                    self._event("target_node", node=target, xy=path[target].tolist())
+                d_goal = float(np.hypot(*(goal - here)))
+                if target == len(path) - 1 and d_goal < cfg.goal_reached_m:
+                    if self._since_fix_m == 0.0:
+                        break  # confirmed by a fix taken here
+                    est = self.localize_now()
+                    if est.ok:
+                        continue  # re-check with the fix
+                    retries += 1
+                    if retries > cfg.max_localize_retries:
+                        break  # accept odometry, reported by localized_at_goal = False
+                    if cfg.retry_turn_deg > 0:  # look elsewhere: +a, -a, +2a, -2a ... about here
+                        k = retries
+                        self._motion("turn", math.radians((-1) ** (k + 1) * k * cfg.retry_turn_deg))
+                    else:
+                        self._motion("drive", -cfg.retry_move_m)
+                    continue
+                tgt = path[target]
+                turn = wrap_angle(math.atan2(tgt[1] - here[1], tgt[0] - here[0]) - p.theta)
+                if abs(math.degrees(turn)) > cfg.min_turn_deg:
+                    self._motion("turn", turn)
+                    if abs(math.degrees(turn)) > cfg.localize_after_turn_deg:
+                        self.localize_now()
+                        continue  # the fix may change the heading to steer
+                p = self.pose
+                dist = float(np.hypot(tgt[0] - p.x, tgt[1] - p.y))
+                step = min(dist, cfg.localize_every_m)
+                r = self._motion("drive", step)
+                if r.status in (MotionStatus.BUMPED, MotionStatus.STALLED):
+                    plan = self._handle_obstacle(r, goal)
+                    path = plan.waypoints_xy
+                    target = 1 if len(path) > 1 else 0
+                    continue
+                at_node = step >= dist - 1e-9
+                if at_node or self._since_fix_m >= cfg.localize_every_m:
+                    self.localize_now()
+            res.reached = True
+            res.reason = "reached"
+            res.localized_at_goal = self._since_fix_m == 0.0
+            if goal_theta is not None and cfg.turn_to_goal_heading:
+                for _ in range(3):  # turn, check the heading with a fix, correct the slip
+                    turn = wrap_angle(goal_theta - self.pose.theta)
+                    if abs(math.degrees(turn)) <= cfg.min_turn_deg:
+                        break
+                    self._motion("turn", turn)
+                    self.localize_now()
+        except _GiveUp as g:
+            res.reached = False
+            res.reason = g.reason
+        p = self.pose
+        res.pose = p
+        res.distance_m = float(np.hypot(goal[0] - p.x, goal[1] - p.y))
+        self._event("follow_end", **res.as_record())
+        self._result = None
+        return res
+
+    def go_to(self, goal_xy: np.ndarray, goal_theta: float | None = None, goal_index: int = 0):
+        """Plan from the current pose estimate to ``goal_xy`` and follow the path.
+
+        Returns:
+            A :class:`FollowResult`; a goal that cannot be planned to is abandoned with the
+            planner's reason.
+        """
+        self._goal_index = goal_index
+        if self._since_fix_m > 0:
+            self.localize_now()
+        p = self.pose
+        plan = self.planner(np.array([p.x, p.y]), np.asarray(goal_xy, float))
+        if isinstance(plan, PlanFailure):
+            res = FollowResult(False, f"skipped: {plan.message}", p, math.inf)
+            self._event("goal_skipped", reason=str(plan.reason), message=plan.message)
+            return res
+        return self.follow(plan.waypoints_xy, goal_theta, goal_index)
+
+    def go_to_view(self, camera_xy: np.ndarray, heading: float, goal_index: int = 0):
+        """Go where the camera centre lands on ``camera_xy`` facing ``heading`` (a goals.json
+        goal: camera centre x, y in m and heading theta in rad)."""
+        c, s = math.cos(heading), math.sin(heading)
+        fwd, left = self.cfg.camera_forward_m, self.cfg.camera_left_m
+        robot_xy = np.asarray(camera_xy, float) - np.array([fwd * c - left * s, fwd * s + left * c])
+        return self.go_to(robot_xy, heading, goal_index)

@@ -1,0 +1,208 @@
+"""The ``plan`` stage: navigation grid of round r's map and a path to every goal.
+
+Inputs: ``round_{r}/sfm/`` (COLMAP binary model, map frame: cameras in z = 0, z up, metres)
+and ``round_{r}/goals.json``. Outputs: ``round_{r}/navgrid.npz`` (see
+:meth:`scenebot.plan.navgrid.NavGrid.save`), ``round_{r}/paths.json`` and, with
+``cfg.plot``, ``round_{r}/navgrid.png``.
+
+``goals.json`` is read leniently: either a list of goals or an object with a ``goals`` list;
+a goal is ``{"x": .., "y": .., "theta": ..}`` (camera centre in m, heading in rad, as the
+goals stage writes them; extra keys are kept) or ``[x, y, theta]``. Paths lead the robot's
+rotation axis to ``robot_goal``, the spot from which the camera centre lands on the goal.
+
+Paths are chained: start -> goal 0 -> goal 1 -> ...; a skipped goal (outside the grid, in an
+obstacle, no route) is recorded with its reason and the chain continues from the last goal
+that was reached. The start is ``start_xy`` when given, else the centre of the map's last
+image in name order (where the robot stopped in the latest round).
+
+``paths.json``::
+
+    {"grid": {"origin_xy", "cell_m", "shape"}, "start": [x, y], "config": {...},
+     "paths": [{"goal_index", "goal": {...}, "from": [x, y], "status": "ok", "waypoints":
+                [[x, y], ...], "length_m", "cost", "astar_cost", ...}
+               | {"goal_index", "goal", "from", "status": "skipped", "reason", "message"}]}
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.plan.config import PlanConfig
+from scenebot.plan.navgrid import NavGrid, build_navgrid
+from scenebot.plan.path import PlanFailure, plan_path
+
+
+@dataclass(frozen=True)
+class PlanInputs:
+    """Files the stage reads."""
+
+    sfm_dir: Path
+    goals_json: Path
+
+
+@dataclass(frozen=True)
+class PlanOutputs:
+    """Files the stage writes."""
+
+    navgrid_npz: Path
+    paths_json: Path
+    plot_png: Path | None = None
+
+
+def read_map_geometry(sfm_dir: Path, with_headings: bool = False):
+    """3D points and camera centres of a COLMAP model.
+
+    Args:
+        sfm_dir: folder with cameras.bin, images.bin, points3D.bin.
+
+    Returns:
+        points (N, 3) m, camera centres (M, 3) m of the registered images and their names in
+        image-name order; with ``with_headings`` also (M,) headings (rad) of the optical axes.
+
+    Raises:
+        FileNotFoundError: the folder does not hold a COLMAP model.
+    """
+    import pycolmap
+
+    sfm_dir = Path(sfm_dir)
+    if not (sfm_dir / "images.bin").exists() and not (sfm_dir / "images.txt").exists():
+        raise FileNotFoundError(
+            f"{sfm_dir}: no COLMAP model (images.bin); run the sfm stage for this round first"
+        )
+    rec = pycolmap.Reconstruction(str(sfm_dir))
+    pts = np.array([p.xyz for p in rec.points3D.values()], float).reshape(-1, 3)
+    imgs = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
+    centres = np.array([im.projection_center() for im in imgs], float).reshape(-1, 3)
+    names = [im.name for im in imgs]
+    if not with_headings:
+        return pts, centres, names
+    fwd = [np.asarray(im.cam_from_world().rotation.matrix())[2] for im in imgs]
+    headings = np.array([np.arctan2(f[1], f[0]) for f in fwd], float)
+    return pts, centres, names, headings
+
+
+def read_goals(goals_json: Path) -> list[dict]:
+    """Goals as dicts with at least ``x`` and ``y`` (m), see the module docstring."""
+    goals_json = Path(goals_json)
+    data = json.loads(goals_json.read_text(encoding="utf-8"))
+    items = data.get("goals", []) if isinstance(data, dict) else data
+    goals = []
+    for i, g in enumerate(items):
+        if isinstance(g, dict) and "x" in g and "y" in g:
+            goals.append(dict(g))
+        elif isinstance(g, list | tuple) and len(g) >= 2:
+            goals.append({"x": g[0], "y": g[1], **({"theta": g[2]} if len(g) > 2 else {})})
+        else:
+            raise ValueError(f"{goals_json}: goal {i} is neither {{x, y, ...}} nor [x, y, theta]")
+    return goals
+
+
+def robot_xy_for_camera(
+    camera_xy: np.ndarray, heading: float, camera_offset_m: tuple[float, float]
+) -> np.ndarray:
+    """Where the robot's rotation axis is when its camera centre is at ``camera_xy``.
+
+    Args:
+        camera_xy: (2,) camera centre (m).
+        heading: robot heading (rad).
+        camera_offset_m: camera centre (forward, left) of the rotation axis (m).
+    """
+    fwd, left = camera_offset_m
+    c, s = np.cos(heading), np.sin(heading)
+    return np.asarray(camera_xy, float) - np.array([fwd * c - left * s, fwd * s + left * c])
+
+
+def plan_all(
+    grid: NavGrid,
+    start_xy: np.ndarray,
+    goals: list[dict],
+    cfg: PlanConfig,
+    camera_offset_m: tuple[float, float] = (0.0, 0.0),
+) -> list[dict]:
+    """Chained paths start -> goal 0 -> goal 1 ...; skipped goals carry their reason.
+
+    Goals are camera poses (goals.json's convention: camera centre x, y and heading theta);
+    the path leads the robot's rotation axis to where the camera centre lands on the goal
+    (``robot_goal`` in the records). A goal without ``theta`` is taken as a robot position.
+    """
+    here = np.asarray(start_xy, float)
+    out = []
+    for i, goal in enumerate(goals):
+        gxy = np.array([float(goal["x"]), float(goal["y"])])
+        if goal.get("theta") is not None:
+            gxy = robot_xy_for_camera(gxy, float(goal["theta"]), camera_offset_m)
+        res = plan_path(grid, here, gxy, cfg.simplify_factor)
+        rec = {
+            "goal_index": i,
+            "goal": goal,
+            "robot_goal": gxy.tolist(),
+            "from": here.tolist(),
+            **res.as_dict(),
+        }
+        out.append(rec)
+        if not isinstance(res, PlanFailure):
+            here = gxy
+    return out
+
+
+def run(
+    cfg: PlanConfig,
+    inputs: PlanInputs,
+    outputs: PlanOutputs,
+    start_xy: tuple[float, float] | None = None,
+    camera_offset_m: tuple[float, float] = (0.0, 0.0),
+) -> dict:
+    """Build the navigation grid and plan the paths to every goal.
+
+    Args:
+        cfg: plan settings.
+        inputs: the map folder and goals file.
+        outputs: where to write the grid, the paths and the picture.
+        start_xy: robot position (m, map frame); default: the robot position of the map's
+            last image (its camera centre minus the camera offset).
+        camera_offset_m: camera centre (forward, left) of the robot's rotation axis (m);
+            the simulator's camera.forward_offset_m / lateral_offset_m.
+
+    Returns:
+        The ``paths.json`` content.
+    """
+    points, centres, _, headings = read_map_geometry(inputs.sfm_dir, with_headings=True)
+    if len(centres) == 0:
+        raise ValueError(f"{inputs.sfm_dir}: the model has no registered images")
+    grid = build_navgrid(points, centres[:, :2], cfg)
+    grid.save(outputs.navgrid_npz)
+    goals = read_goals(inputs.goals_json)
+    if start_xy is not None:
+        start = np.asarray(start_xy, float)
+    else:
+        start = robot_xy_for_camera(centres[-1, :2], headings[-1], camera_offset_m)
+    paths = plan_all(grid, start, goals, cfg, camera_offset_m)
+    g = grid.geometry
+    doc = {
+        "grid": {"origin_xy": list(g.origin_xy), "cell_m": g.cell_m, "shape": list(g.shape)},
+        "start": start.tolist(),
+        "config": cfg.model_dump(),
+        "paths": paths,
+    }
+    outputs.paths_json.parent.mkdir(parents=True, exist_ok=True)
+    outputs.paths_json.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    if cfg.plot and outputs.plot_png is not None:
+        from scenebot.plan.plots import plot_navgrid
+
+        ok = [np.array(p["waypoints"]) for p in paths if p["status"] == "ok"]
+        gxy = np.array([p["robot_goal"] for p in paths if p["status"] == "ok"])
+        sxy = np.array([p["robot_goal"] for p in paths if p["status"] != "ok"])
+        plot_navgrid(
+            grid,
+            ok,
+            outputs.plot_png,
+            goals_xy=gxy.reshape(-1, 2),
+            skipped_xy=sxy.reshape(-1, 2),
+            camera_xy=centres[:, :2],
+            title=f"navigation grid ({g.shape[1]}x{g.shape[0]} cells of {g.cell_m:.3f} m)",
+        )
+    return doc

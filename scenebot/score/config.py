@@ -1,0 +1,113 @@
+"""Settings of the mesh, score and goals stages (issue 4).
+
+Three small pydantic models, one per stage, so that the lead can nest them in the single
+project config (e.g. ``mesh:``, ``score:``, ``goals:`` sections of ``config.yaml``).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class MeshConfig(BaseModel):
+    """Poisson mesh of the sparse map and the free space cut from it (``mesh`` stage)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    min_track_length: int = Field(
+        2, ge=2, description="Only 3D points seen in at least this many images are meshed."
+    )
+    normal_knn: int = Field(
+        20, ge=3, description="Neighbours (count) used to estimate each point's normal."
+    )
+    poisson_depth: int = Field(
+        8, ge=4, le=12, description="Octree depth of Poisson reconstruction (2^depth cells/side)."
+    )
+    density_quantile: float = Field(
+        0.05,
+        ge=0.0,
+        lt=1.0,
+        description="Vertices whose Poisson density is below this quantile are trimmed (0..1).",
+    )
+    bbox_margin_m: float = Field(
+        0.25, ge=0.0, description="Mesh is cropped to the points' bounding box grown by this (m)."
+    )
+    min_points: int = Field(
+        50, ge=4, description="Fewer usable 3D points than this is an error (count)."
+    )
+    robot_radius_m: float = Field(
+        0.15, gt=0.0, description="Robot footprint radius (m): free space keeps this from walls."
+    )
+    cut_heights_m: list[float] = Field(
+        default_factory=lambda: [0.0],
+        min_length=1,
+        description=(
+            "Heights (m, robot frame, 0 = camera plane) at which the mesh is cut to find "
+            "obstacles; the paper uses the camera plane only."
+        ),
+    )
+    grid_resolution_m: float = Field(
+        0.02, gt=0.0, description="Cell size of the free-space raster (m)."
+    )
+
+
+class ScoreConfig(BaseModel):
+    """Candidate viewpoints and the rendering-quality score (``score`` stage)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    n_candidates: int = Field(2000, ge=1, description="Random candidate poses to score (count).")
+    seed: int = Field(0, description="Seed of the candidate sampler.")
+    width: int = Field(80, ge=4, description="Width of the virtual candidate render (pixels).")
+    height: int = Field(60, ge=3, description="Height of the virtual candidate render (pixels).")
+    source_depth_width: int = Field(
+        160, ge=8, description="Width of each source camera's depth map (pixels)."
+    )
+    depth_tolerance: float = Field(
+        0.03,
+        ge=0.0,
+        description=(
+            "Relative depth tolerance of the source visibility test: P is seen by C_i when its "
+            "depth is <= (1 + tolerance) x the largest depth of the 2x2 depth-map pixels around "
+            "its projection (fraction)."
+        ),
+    )
+    near_m: float = Field(0.02, gt=0.0, description="Near clipping distance of all renders (m).")
+    max_triangles: int = Field(
+        10000,
+        ge=0,
+        description="Mesh is decimated to at most this many triangles for scoring (0 = keep all).",
+    )
+    batch_size: int = Field(256, ge=1, description="Candidates rendered per taichi launch.")
+    backend: Literal["auto", "cpu", "gpu"] = Field(
+        "auto",
+        description="Taichi backend: auto = CUDA/Vulkan if present else CPU; gpu = fail if none.",
+    )
+    plot_top: int = Field(4, ge=0, description="Top candidates drawn as per-pixel score images.")
+
+
+class GoalsConfig(BaseModel):
+    """Choice of goals among the scored candidates (``goals`` stage)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    k: int = Field(5, ge=1, description="Most goals chosen per round (count).")
+    nms_radius_m: float = Field(
+        0.5, ge=0.0, description="Two goals closer than this (m) must differ in heading."
+    )
+    nms_angle_deg: float = Field(
+        45.0, ge=0.0, le=180.0, description="...by more than this heading difference (degrees)."
+    )
+    complete_threshold_deg: float = Field(
+        10.0,
+        ge=0.0,
+        description="Exploration is complete when the best (highest) view score is below this.",
+    )
+    min_hit_fraction: float = Field(
+        0.2,
+        ge=0.0,
+        le=1.0,
+        description="Candidates whose render hits the mesh on fewer pixels than this are skipped.",
+    )

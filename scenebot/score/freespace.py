@@ -1,0 +1,329 @@
+"""Free space: the mesh cut by the camera plane, shrunk by the robot radius (paper IV.B).
+
+The mesh is cut at the configured heights (default only the camera plane z = 0); the cut
+segments are drawn into a raster of ``grid_resolution_m`` cells; cells farther than the robot
+radius from every segment are free; the connected free regions that hold the map's camera
+centres are the free space. A point is *in free space* when its cell is free and its exact
+distance to the cut segments is at least the robot radius.
+
+Files: ``freespace.json`` (polygons in metres, GeoJSON-like ``MultiPolygon`` coordinates with
+holes, plus the raster's geometry), ``freespace.npz`` (the raster ``mask`` (ny, nx) uint8, its
+``origin`` (x, y of the corner of cell (0, 0), m), ``resolution`` (m) and the cut ``segments``
+(M, 2, 2) in metres), and a picture.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+class FreeSpaceError(ValueError):
+    """No usable free space; the message says which round and what to change."""
+
+
+def cut_segments(verts: np.ndarray, faces: np.ndarray, z: float) -> np.ndarray:
+    """Intersection of a triangle mesh with the horizontal plane at height ``z``.
+
+    Args:
+        verts: (V, 3) vertices (m).
+        faces: (F, 3) triangles.
+        z: plane height (m).
+
+    Returns:
+        (M, 2, 2) segments, endpoints (x, y) in metres.
+    """
+    tri = verts[faces]  # (F, 3, 3)
+    s = tri[:, :, 2] - z
+    s = np.where(s == 0, 1e-12, s)  # a vertex on the plane counts as above it
+    pos = s > 0
+    cross = pos.any(axis=1) & (~pos).any(axis=1)
+    tri, s, pos = tri[cross], s[cross], pos[cross]
+    # the lone vertex (on its own side) and the two edges from it cross the plane
+    lone = np.where(pos.sum(axis=1) == 1, np.argmax(pos, axis=1), np.argmin(pos, axis=1))
+    idx = np.arange(len(tri))
+    a = tri[idx, lone]
+    sa = s[idx, lone]
+    pts = []
+    for k in (1, 2):
+        o = (lone + k) % 3
+        b = tri[idx, o]
+        sb = s[idx, o]
+        w = sa / (sa - sb)
+        pts.append(a[:, :2] + w[:, None] * (b[:, :2] - a[:, :2]))
+    return np.stack(pts, axis=1)
+
+
+def point_segment_distance(p: np.ndarray, seg: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """Distance from each point to the nearest segment.
+
+    Args:
+        p: (N, 2) points (m).
+        seg: (M, 2, 2) segments (m).
+        chunk: points per vectorized block.
+
+    Returns:
+        (N,) distances (m); +inf when there are no segments.
+    """
+    p = np.asarray(p, np.float64).reshape(-1, 2)
+    out = np.full(len(p), np.inf)
+    if len(seg) == 0:
+        return out
+    a = seg[:, 0]
+    ab = seg[:, 1] - a
+    ab2 = np.maximum((ab * ab).sum(axis=1), 1e-18)
+    for s in range(0, len(p), chunk):
+        q = p[s : s + chunk, None, :] - a[None]  # (n, M, 2)
+        t = np.clip((q * ab[None]).sum(-1) / ab2[None], 0.0, 1.0)
+        d = q - t[..., None] * ab[None]
+        out[s : s + chunk] = np.sqrt((d * d).sum(-1).min(axis=1))
+    return out
+
+
+@dataclass
+class FreeSpace:
+    """The free space of one round.
+
+    Attributes:
+        mask: (ny, nx) bool raster, True = free (row j is y, column i is x).
+        origin: (2,) x, y of the outer corner of cell (0, 0) (m).
+        resolution: cell size (m).
+        segments: (M, 2, 2) cut segments (obstacles) (m).
+        robot_radius: clearance kept from the segments (m).
+        closed: False when the free region reaches the raster border (the mesh does not
+            enclose the cameras at the cut heights).
+    """
+
+    mask: np.ndarray
+    origin: np.ndarray
+    resolution: float
+    segments: np.ndarray
+    robot_radius: float
+    closed: bool = True
+
+    @property
+    def area_m2(self) -> float:
+        """Free area (m^2)."""
+        return float(self.mask.sum()) * self.resolution**2
+
+    def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cell indices (j, i) of points (N, 2) and whether they fall inside the raster."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        ij = np.floor((xy - self.origin) / self.resolution).astype(np.int64)
+        i, j = ij[:, 0], ij[:, 1]
+        ok = (i >= 0) & (j >= 0) & (i < self.mask.shape[1]) & (j < self.mask.shape[0])
+        return np.clip(j, 0, self.mask.shape[0] - 1), np.clip(i, 0, self.mask.shape[1] - 1), ok
+
+    def contains(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: points (N, 2) (m) in free space (free cell and exact clearance)."""
+        j, i, ok = self.cell_of(xy)
+        inside = ok & self.mask[j, i]
+        clear = point_segment_distance(xy, self.segments) >= self.robot_radius
+        return inside & clear
+
+    def polygons(self) -> list[list[list[list[float]]]]:
+        """Free-space outlines as MultiPolygon coordinates: polygons of [exterior, *holes] rings
+        of [x, y] points (m), exteriors counter-clockwise."""
+        import cv2
+
+        m = self.mask.astype(np.uint8)
+        contours, hier = cv2.findContours(m, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
+        polys: list[list[list[list[float]]]] = []
+        if hier is None:
+            return polys
+        hier = hier[0]
+
+        def ring(c: np.ndarray) -> list[list[float]]:
+            pts = (c.reshape(-1, 2) + 0.5) * self.resolution + self.origin
+            pts = np.vstack([pts, pts[:1]])
+            return np.round(pts, 4).tolist()
+
+        for k, c in enumerate(contours):
+            if hier[k][3] >= 0:
+                continue  # a hole: attached to its parent below
+            rings = [ring(c)]
+            child = hier[k][2]
+            while child >= 0:
+                rings.append(ring(contours[child]))
+                child = hier[child][0]
+            polys.append(rings)
+        return polys
+
+    def save(self, json_path: str | Path, npz_path: str | Path, round_name: str) -> None:
+        """Write ``freespace.json`` and ``freespace.npz``."""
+        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(
+            npz_path,
+            mask=self.mask.astype(np.uint8),
+            origin=self.origin,
+            resolution=np.float64(self.resolution),
+            segments=self.segments,
+            robot_radius=np.float64(self.robot_radius),
+            closed=np.bool_(self.closed),
+        )
+        doc = {
+            "round": round_name,
+            "type": "MultiPolygon",
+            "units": "m",
+            "frame": "robot map frame (z up, camera plane z = 0)",
+            "coordinates": self.polygons(),
+            "area_m2": round(self.area_m2, 4),
+            "robot_radius_m": self.robot_radius,
+            "closed": bool(self.closed),
+            "raster": {
+                "file": Path(npz_path).name,
+                "origin_xy_m": self.origin.tolist(),
+                "resolution_m": self.resolution,
+                "shape_yx": list(self.mask.shape),
+            },
+        }
+        Path(json_path).write_text(json.dumps(doc, indent=1))
+
+    @staticmethod
+    def load(npz_path: str | Path) -> FreeSpace:
+        """Read ``freespace.npz``."""
+        if not Path(npz_path).exists():
+            raise FileNotFoundError(
+                f"{npz_path}: no free space here; run the mesh stage for this round first"
+            )
+        z = np.load(npz_path)
+        return FreeSpace(
+            mask=z["mask"].astype(bool),
+            origin=z["origin"],
+            resolution=float(z["resolution"]),
+            segments=z["segments"],
+            robot_radius=float(z["robot_radius"]),
+            closed=bool(z["closed"]),
+        )
+
+
+def line_of_sight(
+    wall: np.ndarray, xy: np.ndarray, origin: np.ndarray, resolution: float, n_rays: int = 720
+) -> np.ndarray:
+    """Cells visible in the plane from any of the given positions (union of visibility polygons).
+
+    From each distinct position (rounded to 5 cm) ``n_rays`` rays march in steps of half a cell
+    until they reach a wall cell or the raster border; the polygon through the ray ends is
+    filled.
+
+    Args:
+        wall: (ny, nx) bool wall raster.
+        xy: (N, 2) viewpoints (m).
+        origin: (2,) raster corner (m).
+        resolution: cell size (m).
+        n_rays: rays per viewpoint.
+
+    Returns:
+        (ny, nx) bool.
+    """
+    import cv2
+
+    ny, nx = wall.shape
+    out = np.zeros((ny, nx), np.uint8)
+    pos = np.unique(np.round(np.asarray(xy, np.float64) / 0.05) * 0.05, axis=0)
+    ang = np.linspace(0.0, 2 * np.pi, n_rays, endpoint=False)
+    d = np.stack([np.cos(ang), np.sin(ang)], 1)
+    steps = np.arange(1, int(np.hypot(nx, ny) * 2) + 2) * 0.5  # in cells
+    block = 64
+    for p in pos:
+        c = (p - origin) / resolution  # position in cell units
+        end = np.full(n_rays, steps[-1])
+        live = np.arange(n_rays)
+        for s0 in range(0, len(steps), block):  # march in blocks; finished rays drop out
+            st = steps[s0 : s0 + block]
+            q = c[None, None, :] + st[None, :, None] * d[live, None, :]  # (rays, steps, 2)
+            ij = np.floor(q).astype(np.int64)
+            hit = (ij[..., 0] < 0) | (ij[..., 1] < 0) | (ij[..., 0] >= nx) | (ij[..., 1] >= ny)
+            inside = ~hit
+            hit[inside] = wall[ij[..., 1][inside], ij[..., 0][inside]]
+            done = hit.any(axis=1)
+            end[live[done]] = st[hit[done].argmax(axis=1)]
+            live = live[~done]
+            if len(live) == 0:
+                break
+        ends = c + end[:, None] * d  # the ray end, in cell units
+        poly = np.round(ends - 0.5).astype(np.int32)  # cell-centre coordinates for cv2
+        cv2.fillPoly(out, [poly.reshape(-1, 1, 2)], 1)
+    return out.astype(bool)
+
+
+def compute_freespace(
+    verts: np.ndarray,
+    faces: np.ndarray,
+    cam_xy: np.ndarray,
+    robot_radius: float,
+    cut_heights: list[float],
+    resolution: float,
+    where: str,
+) -> FreeSpace:
+    """Free space of a mesh around the cameras.
+
+    Args:
+        verts: (V, 3) mesh vertices (m).
+        faces: (F, 3) triangles.
+        cam_xy: (S, 2) camera centres of the map (m).
+        robot_radius: clearance (m).
+        cut_heights: heights of the cutting planes (m).
+        resolution: raster cell size (m).
+        where: round name for error messages.
+
+    Returns:
+        The free space.
+
+    Raises:
+        FreeSpaceError: no camera lies in a free region.
+    """
+    from scipy import ndimage
+
+    segs = np.concatenate([cut_segments(verts, faces, h) for h in cut_heights], axis=0)
+    pts = np.concatenate([verts[:, :2], cam_xy.reshape(-1, 2)])
+    pad = robot_radius + 3 * resolution
+    origin = pts.min(axis=0) - pad
+    shape = np.ceil((pts.max(axis=0) + pad - origin) / resolution).astype(int)[::-1]  # (ny, nx)
+    if shape.prod() > 4e7:
+        raise FreeSpaceError(
+            f"{where}: the free-space raster would have {shape.prod():.0f} cells; raise "
+            "mesh.grid_resolution_m"
+        )
+    wall = np.zeros(shape, bool)
+    if len(segs):
+        L = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
+        n = np.maximum(2, np.ceil(L / (0.5 * resolution)).astype(int) + 1)
+        rep = np.repeat(np.arange(len(segs)), n)
+        t = np.concatenate([np.linspace(0, 1, k) for k in n])
+        p = segs[rep, 0] + t[:, None] * (segs[rep, 1] - segs[rep, 0])
+        ij = np.floor((p - origin) / resolution).astype(int)
+        wall[ij[:, 1], ij[:, 0]] = True
+    dist = ndimage.distance_transform_edt(~wall) * resolution
+    # cell centre within robot_radius + half a cell diagonal of a wall cell centre -> blocked
+    free = dist > robot_radius + 0.71 * resolution
+    # only space the cameras have looked across: where the map has holes (walls never
+    # photographed) the region would otherwise flow around the outside of the mapped walls
+    free &= line_of_sight(wall, cam_xy.reshape(-1, 2), origin, resolution)
+    labels, _ = ndimage.label(free)
+    cams = np.floor((cam_xy.reshape(-1, 2) - origin) / resolution).astype(int)
+    keep = set()
+    # a camera closer than the radius to the (noisy) mesh joins the nearest free region within
+    # half a radius; farther regions may lie behind a wall
+    reach = int(np.ceil(0.5 * robot_radius / resolution)) + 1
+    for i, j in cams:
+        lab = labels[max(0, j - reach) : j + reach + 1, max(0, i - reach) : i + reach + 1]
+        if labels[j, i] > 0:
+            keep.add(int(labels[j, i]))
+        elif (lab > 0).any():  # camera closer than the radius to a wall: nearest free region
+            jj, ii = np.nonzero(lab > 0)
+            k = np.argmin((jj - min(j, reach)) ** 2 + (ii - min(i, reach)) ** 2)
+            keep.add(int(lab[jj[k], ii[k]]))
+    mask = np.isin(labels, sorted(keep)) if keep else np.zeros(shape, bool)
+    if not mask.any():
+        raise FreeSpaceError(
+            f"{where}: the free space is empty: no camera of the map lies in a region at least "
+            f"mesh.robot_radius_m = {robot_radius} m from the mesh cut at heights {cut_heights} m; "
+            "check the map alignment (cameras on z = 0), lower mesh.robot_radius_m, or lower "
+            "mesh.density_quantile so the mesh has fewer spurious surfaces"
+        )
+    closed = not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+    return FreeSpace(mask, origin, float(resolution), segs, float(robot_radius), closed)

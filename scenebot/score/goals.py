@@ -1,0 +1,113 @@
+"""Goals: the candidates with the poorest predicted rendering, kept diverse (``goals.json``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def heading_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Absolute difference of headings (rad), wrapped to [0, pi]."""
+    return np.abs((np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi)
+
+
+def select_goals(
+    poses: np.ndarray,
+    score: np.ndarray,
+    k: int,
+    radius_m: float,
+    angle_deg: float,
+    valid: np.ndarray | None = None,
+) -> np.ndarray:
+    """Greedy non-maximum suppression: highest scores first, diverse in position and heading.
+
+    A candidate is suppressed when an already chosen goal is closer than ``radius_m`` AND its
+    heading differs by at most ``angle_deg``.
+
+    Args:
+        poses: (N, 3) x, y (m), theta (rad).
+        score: (N,) view scores (degrees; higher = poorer predicted rendering); NaN is skipped.
+        k: most goals.
+        radius_m: suppression radius (m).
+        angle_deg: suppression heading threshold (degrees).
+        valid: (N,) bool, candidates allowed at all (default all).
+
+    Returns:
+        (<= k,) indices of the chosen candidates, best first.
+    """
+    score = np.asarray(score, np.float64)
+    ok = np.isfinite(score) if valid is None else (np.isfinite(score) & valid)
+    idx = np.nonzero(ok)[0]
+    idx = idx[np.argsort(-score[idx], kind="stable")]
+    chosen: list[int] = []
+    thr = np.deg2rad(angle_deg)
+    for c in idx:
+        if len(chosen) == k:
+            break
+        if chosen:
+            g = poses[chosen]
+            near = np.hypot(g[:, 0] - poses[c, 0], g[:, 1] - poses[c, 1]) < radius_m
+            same = heading_difference(g[:, 2], poses[c, 2]) <= thr
+            if (near & same).any():
+                continue
+        chosen.append(int(c))
+    return np.array(chosen, dtype=np.int64)
+
+
+def goals_document(
+    poses: np.ndarray,
+    score: np.ndarray,
+    chosen: np.ndarray,
+    threshold_deg: float,
+    round_name: str,
+    extra: dict | None = None,
+) -> dict:
+    """The ``goals.json`` content.
+
+    ``complete`` is True when the best (highest) finite view score is below the threshold:
+    every candidate view is predicted to render well from the photos already taken. In that
+    case the goals are still listed (for information) but the workflow should stop exploring.
+
+    Args:
+        poses: (N, 3) candidate poses.
+        score: (N,) view scores (degrees).
+        chosen: indices from :func:`select_goals`.
+        threshold_deg: completeness threshold (degrees).
+        round_name: e.g. ``"round_002"``.
+        extra: more top-level fields (settings, counts).
+
+    Returns:
+        A JSON-serialisable dict.
+    """
+    finite = np.isfinite(score)
+    best = float(np.max(score[finite])) if finite.any() else float("nan")
+    doc = {
+        "round": round_name,
+        "complete": bool(finite.any() and best < threshold_deg),
+        "best_score_deg": None if not np.isfinite(best) else round(best, 4),
+        "threshold_deg": threshold_deg,
+        "n_candidates": len(score),
+        "pose_convention": "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)",
+        "goals": [
+            {
+                "rank": r,
+                "candidate": int(c),
+                "x": round(float(poses[c, 0]), 4),
+                "y": round(float(poses[c, 1]), 4),
+                "theta": round(float(poses[c, 2]), 5),
+                "score_deg": round(float(score[c]), 4),
+            }
+            for r, c in enumerate(chosen)
+        ],
+    }
+    if extra:
+        doc.update(extra)
+    return doc
+
+
+def write_goals(path: str | Path, doc: dict) -> None:
+    """Write ``goals.json``."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps(doc, indent=1))

@@ -1,0 +1,409 @@
+"""The rendering-quality score in taichi (paper section IV.B), batched over candidates.
+
+Definition (shared with :mod:`scenebot.score.reference`): for a candidate camera at L, every
+pixel p of a low-resolution render of the mesh gives the first surface point P on its ray.
+For every source camera C_i (at L_i) that sees P -- P is in front of C_i, projects inside its
+image, and its depth is at most ``(1 + depth_tolerance)`` times the largest depth of the 2x2
+pixels of C_i's depth map around the projection -- the angle
+``theta_i = angle(L - P, L_i - P)`` is formed. The pixel score is ``min_i theta_i`` (degrees),
+or 180 degrees when no source sees P. Pixels whose ray hits nothing are left out: they carry no
+information about the map (the mesh has a hole there), and the caller gets the fraction of
+pixels that hit (``hit_fraction``) to judge such views. The view score is the mean pixel
+score over the hit pixels (degrees); a view that hits nothing scores NaN.
+
+Both passes run in taichi, batched over ``batch_size`` candidates per launch:
+
+1. Primary visibility: a rasterizer writes the z-buffer of every view (edge functions with
+   perspective-correct depth for triangles beyond the near plane, exact ray-triangle tests
+   for triangles that cross it; triangles whose bounding sphere misses the frustum are skipped).
+   The same kernel makes the source depth maps once per map (at ``source_depth_width``) and
+   the candidate renders once per batch. On a CPU each thread owns whole views (plain writes);
+   on a GPU threads own (view, chunk of triangles) pairs and write with atomic min.
+2. Angles: the image is cut into tiles (``tile_px``). For every tile the sources whose view
+   frustum can hold one of the tile's hit points are kept (plane tests against the tile's
+   bounding box: exact culling), sorted by a lower bound of their angle over the whole tile.
+   Every pixel then walks its tile's list, stops when the next lower bound is not below its
+   best angle so far (exact early exit), and runs the depth-map visibility test only for a
+   source that would lower its current minimum. So the result equals the brute-force
+   definition; only the work differs.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenebot.score.geometry import VIEW_COLS, Intrinsics, candidate_views, pack_views
+
+log = logging.getLogger(__name__)
+
+FAR = 1.0e30
+"""Depth of a pixel whose ray hits nothing (m)."""
+
+_TI_STATE: dict[str, object] = {}
+
+
+def init_taichi(backend: str = "auto") -> str:
+    """Start taichi once per process, without crashing on machines that lack a GPU.
+
+    ``ti.init(arch=ti.gpu)`` segfaults on some machines without a GPU, so the GPU backends are
+    asked for explicitly (CUDA, then Vulkan) and taichi falls back to the CPU when neither is
+    there.
+
+    Args:
+        backend: ``"auto"`` (GPU when present, else CPU), ``"cpu"``, or ``"gpu"`` (raise when no
+            GPU backend starts).
+
+    Re-initialising (asking for another backend than the current one) invalidates every
+    existing :class:`TaichiScorer`; with ``"auto"``, a taichi runtime that another module of the
+    process already started is reused as it is.
+
+    Returns:
+        The name of the arch taichi runs on (e.g. ``"x64"``, ``"cuda"``).
+
+    Raises:
+        RuntimeError: ``backend="gpu"`` but no GPU backend is available (set
+            ``score.backend`` to ``auto`` or ``cpu``).
+    """
+    import os
+
+    os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+    import taichi as ti
+
+    if backend not in ("auto", "cpu", "gpu"):
+        raise ValueError(f"score.backend must be auto, cpu or gpu, not {backend!r}")
+    prog = ti.lang.impl.get_runtime().prog
+    if prog is None or prog is not _TI_STATE.get("prog"):
+        _TI_STATE.clear()  # never started, or another module re-initialised taichi since
+    current = _TI_STATE.get("backend")
+    if current == backend or (current is not None and backend == "auto"):
+        return str(_TI_STATE["arch"])
+    if current is None and backend == "auto" and prog is not None:
+        # another part of this process started taichi: reuse it rather than reset its data
+        arch = ti.lang.impl.current_cfg().arch.name
+        _TI_STATE.update(backend=backend, arch=arch, prog=prog)
+        return arch
+    if backend == "cpu":
+        ti.init(arch=ti.cpu, offline_cache=True, log_level=ti.WARN)
+    else:
+        ti.init(arch=[ti.cuda, ti.vulkan], offline_cache=True, log_level=ti.WARN)
+    arch = ti.lang.impl.current_cfg().arch.name
+    _TI_STATE.pop("kernels", None)
+    _TI_STATE["prog"] = ti.lang.impl.get_runtime().prog
+    if backend == "gpu" and arch not in ("cuda", "vulkan"):
+        _TI_STATE.update(backend="auto", arch=arch)
+        raise RuntimeError(
+            "score.backend is 'gpu' but taichi found no CUDA or Vulkan device; "
+            "set score.backend to 'auto' or 'cpu'"
+        )
+    _TI_STATE.update(backend=backend, arch=arch)
+    return arch
+
+
+def _kernels():
+    import taichi as ti
+
+    from scenebot.score import _tikernels as k
+
+    gpu = ti.lang.impl.current_cfg().arch in (ti.cuda, ti.vulkan)
+    return {
+        "fill": k.fill,
+        "raster": k.raster if gpu else k.raster_per_view,
+        "tile_bounds": k.tile_bounds,
+        "cull": k.cull,
+        "angles": k.angles,
+        "view_sums": k.view_sums,
+    }
+
+
+def projection_rows(views: np.ndarray) -> np.ndarray:
+    """Rows of the 3x4 projection ``K [R | t]`` of each view, row-major.
+
+    Args:
+        views: (S, 19) packed views.
+
+    Returns:
+        (S, 12) float32: (u*z, v*z, z) = rows . (X, 1) for a world point X (m).
+    """
+    v = np.asarray(views, np.float64)
+    S = v.shape[0]
+    R = v[:, :9].reshape(S, 3, 3)
+    Rt = np.concatenate([R, v[:, 9:12, None]], axis=2)  # (S, 3, 4)
+    K = np.zeros((S, 3, 3))
+    K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2], K[:, 2, 2] = (
+        v[:, 15],
+        v[:, 16],
+        v[:, 17],
+        v[:, 18],
+        1.0,
+    )
+    return np.ascontiguousarray((K @ Rt).reshape(S, 12), dtype=np.float32)
+
+
+def frustum_planes(src_views: np.ndarray, size: tuple[int, int], near: float) -> np.ndarray:
+    """World-frame planes bounding each source camera's view frustum.
+
+    Args:
+        src_views: (S, 19) packed source views.
+        size: (width, height) of the source images the intrinsics refer to (pixels).
+        near: near distance (m).
+
+    Returns:
+        (S, 5, 4) planes ``n . X + d >= 0`` for points inside (left, right, top, bottom, near),
+        loosened by 1e-4 m so that float rounding never drops a source that sees a point.
+    """
+    v = np.asarray(src_views, np.float64)
+    S = v.shape[0]
+    W, H = size
+    fx, fy, cx, cy = v[:, 15], v[:, 16], v[:, 17], v[:, 18]
+    z0, one = np.zeros(S), np.ones(S)
+    nc = np.stack(
+        [
+            np.stack([fx, z0, cx], 1),
+            np.stack([-fx, z0, W - cx], 1),
+            np.stack([z0, fy, cy], 1),
+            np.stack([z0, -fy, H - cy], 1),
+            np.stack([z0, z0, one], 1),
+        ],
+        axis=1,
+    )  # (S, 5, 3) camera frame
+    nc /= np.linalg.norm(nc, axis=2, keepdims=True)
+    R = v[:, :9].reshape(S, 3, 3)
+    t = v[:, 9:12]
+    nw = np.einsum("sji,spj->spi", R, nc)  # R^T n
+    d = np.einsum("spj,sj->sp", nc, t)
+    d[:, 4] -= near
+    return np.concatenate([nw, (d + 1e-4)[..., None]], axis=2)
+
+
+@dataclass
+class ScoreResult:
+    """Scores of a set of candidate views.
+
+    Attributes:
+        score_deg: (N,) mean pixel score over hit pixels (degrees); NaN when nothing is hit.
+        hit_fraction: (N,) fraction of pixels whose ray hits the mesh (0..1).
+        seen_fraction: (N,) fraction of hit pixels that at least one source sees (0..1).
+        pixels: (N, H, W) per-pixel score (degrees, -1 = no hit), only when requested.
+    """
+
+    score_deg: np.ndarray
+    hit_fraction: np.ndarray
+    seen_fraction: np.ndarray
+    pixels: np.ndarray | None = None
+
+
+def summarize(pix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """View score, hit and seen fractions from per-pixel scores.
+
+    Args:
+        pix: (N, H, W) pixel scores (degrees), negative where the ray hit nothing.
+
+    Returns:
+        score_deg (N,), hit_fraction (N,), seen_fraction (N,) as in :class:`ScoreResult`.
+    """
+    hit = pix >= 0
+    n_hit = hit.sum(axis=(1, 2))
+    total = np.where(hit, pix, 0.0).sum(axis=(1, 2), dtype=np.float64)
+    seen = (hit & (pix < 179.999)).sum(axis=(1, 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        score = np.where(n_hit > 0, total / np.maximum(n_hit, 1), np.nan)
+        seen_frac = np.where(n_hit > 0, seen / np.maximum(n_hit, 1), 0.0)
+    return score, n_hit / pix[0].size, seen_frac
+
+
+class TaichiScorer:
+    """Batched rendering-quality scorer for one map (source depth maps are made once).
+
+    Args:
+        verts: (V, 3) mesh vertices (m).
+        faces: (F, 3) triangle vertex indices.
+        src_views: (S, 19) packed source views (see :mod:`scenebot.score.geometry`), with the
+            intrinsics of the source depth maps.
+        src_size: (width, height) of the source depth maps (pixels).
+        intr: intrinsics of the candidate renders.
+        depth_tolerance: relative depth tolerance of the visibility test (fraction).
+        near_m: near clipping distance (m).
+        batch_size: candidates per launch.
+        backend: ``"auto"``, ``"cpu"`` or ``"gpu"`` (see :func:`init_taichi`).
+        tile_px: (width, height) of the image tiles (pixels); each tile of each candidate
+            visits only the sources whose frustum can hold one of the tile's points, sorted by
+            a lower bound of their angle (exact culling and early exit, for speed).
+    """
+
+    def __init__(
+        self,
+        verts: np.ndarray,
+        faces: np.ndarray,
+        src_views: np.ndarray,
+        src_size: tuple[int, int],
+        intr: Intrinsics,
+        depth_tolerance: float = 0.03,
+        near_m: float = 0.02,
+        batch_size: int = 256,
+        backend: str = "auto",
+        tile_px: tuple[int, int] = (8, 12),
+    ) -> None:
+        import taichi as ti
+
+        self.arch = init_taichi(backend)
+        self.k = _kernels()
+        verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
+        faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
+        if faces.shape[0] == 0:
+            raise ValueError("TaichiScorer: the mesh has no triangles")
+        src_views = np.ascontiguousarray(src_views, dtype=np.float32).reshape(-1, VIEW_COLS)
+        if src_views.shape[0] == 0:
+            raise ValueError("TaichiScorer: no source views")
+        self.intr = intr
+        self.tol = float(depth_tolerance)
+        self.near = float(near_m)
+        self.batch = int(batch_size)
+        self.n_src = src_views.shape[0]
+        self.src_centres = src_views[:, 12:15].astype(np.float64)
+        self._verts = self._to_dev(ti, verts, ti.f32)
+        self._faces = self._to_dev(ti, faces, ti.i32)
+        tri = verts[faces].astype(np.float64)
+        centroid = tri.mean(axis=1)
+        radius = np.linalg.norm(tri - centroid[:, None], axis=2).max(axis=1) * 1.001 + 1e-5
+        spheres = np.column_stack([centroid, radius]).astype(np.float32)
+        self._spheres = self._to_dev(ti, spheres, ti.f32)
+        self._src_views = self._to_dev(ti, src_views, ti.f32)
+        ws, hs = src_size
+        self.src_depth = ti.ndarray(ti.f32, shape=(self.n_src, hs, ws))
+        self.k["fill"](self.src_depth, FAR)
+        self.k["raster"](
+            self._verts, self._faces, self._spheres, self._src_views, self.src_depth, self.near
+        )
+        self._src_proj = self._to_dev(ti, projection_rows(src_views), ti.f32)
+        self._src_centres = ti.ndarray(ti.math.vec3, shape=(self.n_src,))
+        self._src_centres.from_numpy(np.ascontiguousarray(src_views[:, 12:15]))
+        planes = frustum_planes(src_views, src_size, self.near).astype(np.float32)
+        self._planes = self._to_dev(ti, planes, ti.f32)
+        self.tiles = (
+            max(1, round(intr.width / max(1, tile_px[0]))),
+            max(1, round(intr.height / max(1, tile_px[1]))),
+        )
+        n_tiles = self.tiles[0] * self.tiles[1]
+        self._depth = ti.ndarray(ti.f32, shape=(self.batch, intr.height, intr.width))
+        self._pix = ti.ndarray(ti.f32, shape=(self.batch, intr.height, intr.width))
+        self._bounds = ti.ndarray(ti.f32, shape=(self.batch, n_tiles, 9))
+        self._lists = ti.ndarray(ti.i32, shape=(self.batch, n_tiles, self.n_src))
+        self._keys = ti.ndarray(ti.f32, shape=(self.batch, n_tiles, self.n_src))
+        self._n_active = ti.ndarray(ti.i32, shape=(self.batch, n_tiles))
+        self._sums = ti.ndarray(ti.f32, shape=(self.batch, 3))
+
+    @staticmethod
+    def _to_dev(ti, a: np.ndarray, dtype):
+        nd = ti.ndarray(dtype, shape=a.shape)
+        nd.from_numpy(a)
+        return nd
+
+    def source_depth_maps(self) -> np.ndarray:
+        """(S, Hs, Ws) source depth maps (m; ``FAR`` where nothing is hit)."""
+        return self.src_depth.to_numpy()
+
+    def render_depth(self, views: np.ndarray) -> np.ndarray:
+        """Z-buffer of the mesh from arbitrary packed views at the candidate resolution.
+
+        Args:
+            views: (N, 19) packed views (N <= batch size).
+
+        Returns:
+            (N, H, W) depth along the camera z axis (m; ``FAR`` where nothing is hit).
+        """
+        n = views.shape[0]
+        self._render(np.ascontiguousarray(views, dtype=np.float32))
+        return self._depth.to_numpy()[:n]
+
+    def _render(self, views32: np.ndarray) -> None:
+        self.k["fill"](self._depth, FAR)
+        self.k["raster"](self._verts, self._faces, self._spheres, views32, self._depth, self.near)
+
+    def score(self, poses: np.ndarray, return_pixels: bool = False) -> ScoreResult:
+        """Score planar candidate poses.
+
+        Args:
+            poses: (N, 3) candidates (x m, y m, theta rad), camera at height z = 0.
+            return_pixels: also return the (N, H, W) per-pixel scores.
+
+        Returns:
+            The scores.
+        """
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        return self.score_views(candidate_views(poses, self.intr), return_pixels)
+
+    def score_views(self, views: np.ndarray, return_pixels: bool = False) -> ScoreResult:
+        """Score arbitrary packed candidate views (N, 19) with the candidate intrinsics."""
+        n = views.shape[0]
+        outs, sums = [], []
+        for s in range(0, n, self.batch):
+            v = views[s : s + self.batch]
+            m = v.shape[0]
+            v32 = np.zeros((self.batch, VIEW_COLS), dtype=np.float32)
+            v32[:m] = v
+            v32[m:] = v[0]
+            self._render(v32)
+            tx, ty = self.tiles
+            self.k["tile_bounds"](self._depth, v32, tx, ty, self._bounds)
+            self.k["cull"](
+                self._bounds,
+                v32,
+                self._src_centres,
+                self._planes,
+                self._lists,
+                self._keys,
+                self._n_active,
+            )
+            self.k["angles"](
+                self._depth,
+                v32,
+                self._src_proj,
+                self._src_centres,
+                self.src_depth,
+                tx,
+                ty,
+                self._lists,
+                self._keys,
+                self._n_active,
+                self.tol,
+                self.near,
+                self._pix,
+            )
+            self.k["view_sums"](self._pix, self._sums)
+            sums.append(self._sums.to_numpy()[:m].astype(np.float64))
+            if return_pixels:
+                outs.append(self._pix.to_numpy()[:m])
+        sums_a = np.concatenate(sums, axis=0) if sums else np.zeros((0, 3))
+        n_pix = self.intr.width * self.intr.height
+        hits = sums_a[:, 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            score = np.where(hits > 0, sums_a[:, 0] / np.maximum(hits, 1), np.nan)
+            seen = np.where(hits > 0, sums_a[:, 2] / np.maximum(hits, 1), 0.0)
+        pix = np.concatenate(outs, axis=0) if return_pixels and outs else None
+        return ScoreResult(score, hits / n_pix, seen, pix)
+
+
+def source_views_for_depth(
+    R: np.ndarray, t: np.ndarray, intrinsics: list[Intrinsics], depth_width: int
+) -> tuple[np.ndarray, tuple[int, int]]:
+    """Packed source views at depth-map resolution.
+
+    All sources' depth maps share one size: that of the first camera scaled to
+    ``depth_width``; every source's own intrinsics are scaled to that size.
+
+    Args:
+        R: (S, 3, 3) cam_from_world rotations.
+        t: (S, 3) translations (m).
+        intrinsics: (S,) native intrinsics.
+        depth_width: depth map width (pixels).
+
+    Returns:
+        (S, 19) packed views and the (width, height) of the depth maps.
+    """
+    first = intrinsics[0].scaled(depth_width)
+    size = (first.width, first.height)
+    scaled = [k.scaled(size[0], size[1]) for k in intrinsics]
+    return pack_views(R, t, scaled), size

@@ -1,0 +1,188 @@
+"""Poisson surface of the sparse map (paper IV.B, "Choosing a goal"), ``round_{r}/mesh.ply``.
+
+Normals come from each point's neighbours (PCA over ``normal_knn`` points, open3d), oriented
+towards the cameras that observed the point; Poisson surface reconstruction (open3d) follows;
+vertices of low Poisson density (far from any point) are trimmed, and the surface is cropped to
+the points' bounding box grown by a margin (Poisson closes the surface far outside the data).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.score.config import MeshConfig
+
+log = logging.getLogger(__name__)
+
+
+class MeshError(ValueError):
+    """The map cannot give a usable mesh; the message says which round and what to change."""
+
+
+def estimate_normals(xyz: np.ndarray, view_dir: np.ndarray, knn: int) -> np.ndarray:
+    """Unit normals from neighbouring points, oriented towards the observing cameras.
+
+    Args:
+        xyz: (N, 3) points (m).
+        view_dir: (N, 3) unit directions from each point towards its cameras (mean).
+        knn: neighbours per point.
+
+    Returns:
+        (N, 3) unit normals with ``normal . view_dir >= 0``.
+    """
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=min(knn, len(xyz) - 1)))
+    n = np.asarray(pcd.normals)
+    flip = np.einsum("nd,nd->n", n, view_dir) < 0
+    n[flip] *= -1
+    return n
+
+
+def poisson_mesh(
+    xyz: np.ndarray,
+    normals: np.ndarray,
+    depth: int = 8,
+    density_quantile: float = 0.05,
+    bbox_margin_m: float = 0.25,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Poisson surface through oriented points, trimmed and cropped.
+
+    Args:
+        xyz: (N, 3) points (m).
+        normals: (N, 3) unit normals.
+        depth: Poisson octree depth.
+        density_quantile: vertices below this quantile of the Poisson density are removed.
+        bbox_margin_m: crop to the points' bounding box grown by this (m).
+
+    Returns:
+        vertices (V, 3) float64 (m), faces (F, 3) int64.
+    """
+    import open3d as o3d
+
+    # n_threads=1: the multi-threaded Poisson of open3d segfaults at random
+    # (isl-org/Open3D#6828); one thread is also deterministic.
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
+    pcd.normals = o3d.utility.Vector3dVector(normals)
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        mesh, dens = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
+            pcd, depth=depth, linear_fit=False, n_threads=1
+        )
+    dens = np.asarray(dens)
+    if len(dens) and density_quantile > 0:
+        mesh.remove_vertices_by_mask(dens < np.quantile(dens, density_quantile))
+    lo = xyz.min(axis=0) - bbox_margin_m
+    hi = xyz.max(axis=0) + bbox_margin_m
+    mesh = mesh.crop(o3d.geometry.AxisAlignedBoundingBox(lo, hi))
+    mesh.remove_unreferenced_vertices()
+    mesh.remove_degenerate_triangles()
+    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.triangles, np.int64)
+
+
+def check_mesh(verts: np.ndarray, faces: np.ndarray, where: str) -> None:
+    """Raise :class:`MeshError` when a mesh is empty or degenerate (zero area or volume extent).
+
+    Args:
+        verts: (V, 3) vertices (m).
+        faces: (F, 3) triangles.
+        where: what to name in the message (e.g. ``"round_002 mesh.ply"``).
+    """
+    hint = (
+        "the map of this round has too few or too flat 3D points; capture more photos "
+        "(more round-0 exploration), or lower mesh.density_quantile / mesh.poisson_depth"
+    )
+    if len(faces) == 0 or len(verts) < 3:
+        raise MeshError(f"{where}: the mesh is empty; {hint}")
+    tri = verts[faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if not np.isfinite(verts).all():
+        raise MeshError(f"{where}: the mesh has non-finite vertices; {hint}")
+    if area.sum() < 1e-6:
+        raise MeshError(f"{where}: the mesh has zero area (degenerate triangles); {hint}")
+    ext = verts.max(axis=0) - verts.min(axis=0)
+    if np.sort(ext)[1] < 1e-3:
+        raise MeshError(f"{where}: the mesh is degenerate (extent {ext.round(4)} m); {hint}")
+
+
+def build_mesh(
+    xyz: np.ndarray, view_dir: np.ndarray, track_len: np.ndarray, cfg: MeshConfig, where: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh of a sparse map.
+
+    Args:
+        xyz: (N, 3) 3D points (m).
+        view_dir: (N, 3) unit mean directions towards the observing cameras.
+        track_len: (N,) observations per point.
+        cfg: mesh settings.
+        where: round name for error messages.
+
+    Returns:
+        vertices (V, 3), faces (F, 3).
+
+    Raises:
+        MeshError: too few points, or an empty/degenerate result.
+    """
+    keep = track_len >= cfg.min_track_length
+    if keep.sum() < cfg.min_points:
+        raise MeshError(
+            f"{where}: only {int(keep.sum())} 3D points with >= {cfg.min_track_length} "
+            f"observations (need mesh.min_points = {cfg.min_points}); capture more photos or "
+            "lower mesh.min_track_length / mesh.min_points"
+        )
+    p, d = xyz[keep], view_dir[keep]
+    normals = estimate_normals(p, d, cfg.normal_knn)
+    V, F = poisson_mesh(p, normals, cfg.poisson_depth, cfg.density_quantile, cfg.bbox_margin_m)
+    check_mesh(V, F, where)
+    return V, F
+
+
+def write_mesh(path: str | Path, verts: np.ndarray, faces: np.ndarray) -> None:
+    """Write a triangle mesh as binary PLY (open3d)."""
+    import open3d as o3d
+
+    m = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.asarray(verts, np.float64)),
+        o3d.utility.Vector3iVector(np.asarray(faces, np.int32)),
+    )
+    m.compute_vertex_normals()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    if not o3d.io.write_triangle_mesh(str(path), m):
+        raise OSError(f"could not write {path}")
+
+
+def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh (PLY/OBJ/...) as vertices (V, 3) float64 and faces (F, 3) int64."""
+    import open3d as o3d
+
+    if not Path(path).exists():
+        raise FileNotFoundError(f"{path}: no mesh here; run the mesh stage for this round first")
+    m = o3d.io.read_triangle_mesh(str(path))
+    return np.asarray(m.vertices, np.float64), np.asarray(m.triangles, np.int64)
+
+
+def decimate(verts: np.ndarray, faces: np.ndarray, max_triangles: int):
+    """Quadric decimation to at most ``max_triangles`` (0 or a smaller mesh: unchanged).
+
+    Args:
+        verts: (V, 3) vertices (m).
+        faces: (F, 3) triangles.
+        max_triangles: target triangle count.
+
+    Returns:
+        vertices (V', 3), faces (F', 3).
+    """
+    if max_triangles <= 0 or len(faces) <= max_triangles:
+        return verts, faces
+    import open3d as o3d
+
+    m = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.asarray(verts, np.float64)),
+        o3d.utility.Vector3iVector(np.asarray(faces, np.int32)),
+    )
+    m = m.simplify_quadric_decimation(target_number_of_triangles=int(max_triangles))
+    m.remove_unreferenced_vertices()
+    return np.asarray(m.vertices, np.float64), np.asarray(m.triangles, np.int64)

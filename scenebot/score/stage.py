@@ -1,0 +1,228 @@
+"""Entry points of the ``mesh``, ``score`` and ``goals`` stages.
+
+Each is a plain function ``run_<stage>(cfg, inputs, outputs)`` with typed dataclass inputs and
+outputs, so Snakemake rules and the CLI call the same code. The round's name (e.g.
+``round_002``) is taken from the paths for error messages.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.score.candidates import read_candidates, sample_candidates, write_candidates
+from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
+from scenebot.score.freespace import FreeSpace, FreeSpaceError, compute_freespace
+from scenebot.score.geometry import read_sparse_map
+from scenebot.score.goals import goals_document, select_goals, write_goals
+from scenebot.score.mesh import MeshError, build_mesh, check_mesh, decimate, read_mesh, write_mesh
+
+log = logging.getLogger(__name__)
+
+
+def round_name(*paths: str | Path) -> str:
+    """``round_XXX`` found in the paths, else the first path (for messages)."""
+    for p in paths:
+        m = re.search(r"round_\d+", str(p))
+        if m:
+            return m.group(0)
+    return str(paths[0]) if paths else "?"
+
+
+@dataclass
+class MeshInputs:
+    """Inputs of the mesh stage: ``sfm_dir`` = ``round_{r}/sfm/`` (COLMAP binary model)."""
+
+    sfm_dir: Path
+
+
+@dataclass
+class MeshOutputs:
+    """Outputs: ``mesh.ply``, ``freespace.json``, ``freespace.npz``, ``freespace.png``."""
+
+    mesh_ply: Path
+    freespace_json: Path
+    freespace_npz: Path
+    freespace_png: Path | None = None
+
+
+def run_mesh(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs) -> dict:
+    """Poisson mesh of the map and its free space.
+
+    Returns:
+        Summary: vertex/face counts, free area (m^2), whether the free space is closed.
+    """
+    where = round_name(inputs.sfm_dir, outputs.mesh_ply)
+    smap = read_sparse_map(inputs.sfm_dir)
+    if len(smap.names) == 0:
+        raise MeshError(f"{where}: the map in {inputs.sfm_dir} has no registered images")
+    V, F = build_mesh(smap.xyz, smap.view_dir, smap.track_len, cfg, where)
+    write_mesh(outputs.mesh_ply, V, F)
+    cam_xy = smap.centres[:, :2]
+    fs = compute_freespace(
+        V, F, cam_xy, cfg.robot_radius_m, cfg.cut_heights_m, cfg.grid_resolution_m, where
+    )
+    fs.save(outputs.freespace_json, outputs.freespace_npz, where)
+    if outputs.freespace_png is not None:
+        from scenebot.score.plots import plot_freespace
+
+        plot_freespace(outputs.freespace_png, fs, cam_xy, where)
+    return {
+        "vertices": len(V),
+        "faces": len(F),
+        "free_area_m2": fs.area_m2,
+        "closed": fs.closed,
+    }
+
+
+@dataclass
+class ScoreInputs:
+    """Inputs of the score stage (all from the same round)."""
+
+    sfm_dir: Path
+    mesh_ply: Path
+    freespace_npz: Path
+
+
+@dataclass
+class ScoreOutputs:
+    """Outputs: ``candidates.csv`` and an optional picture of the top candidates' pixels."""
+
+    candidates_csv: Path
+    views_png: Path | None = None
+
+
+def make_scorer(cfg: ScoreConfig, V: np.ndarray, F: np.ndarray, smap, where: str):
+    """A :class:`~scenebot.score.kernel.TaichiScorer` for a map and its (decimated) mesh."""
+    from scenebot.score.kernel import TaichiScorer, source_views_for_depth
+
+    if len(smap.names) == 0:
+        raise MeshError(f"{where}: the map has no registered images to score against")
+    Vd, Fd = decimate(V, F, cfg.max_triangles)
+    check_mesh(Vd, Fd, f"{where} (decimated to score.max_triangles = {cfg.max_triangles})")
+    src, size = source_views_for_depth(smap.R, smap.t, smap.intrinsics, cfg.source_depth_width)
+    intr = smap.intrinsics[0].scaled(cfg.width, cfg.height)
+    return TaichiScorer(
+        Vd,
+        Fd,
+        src,
+        size,
+        intr,
+        depth_tolerance=cfg.depth_tolerance,
+        near_m=cfg.near_m,
+        batch_size=cfg.batch_size,
+        backend=cfg.backend,
+    )
+
+
+def run_score(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> dict:
+    """Sample candidates in free space and score them.
+
+    Returns:
+        Summary: candidate count, evaluation rate (candidates/s), taichi arch, triangles.
+    """
+    where = round_name(inputs.mesh_ply, outputs.candidates_csv)
+    smap = read_sparse_map(inputs.sfm_dir)
+    V, F = read_mesh(inputs.mesh_ply)
+    check_mesh(V, F, f"{where} {inputs.mesh_ply}")
+    fs = FreeSpace.load(inputs.freespace_npz)
+    poses = sample_candidates(fs, cfg.n_candidates, np.random.default_rng(cfg.seed), where)
+    scorer = make_scorer(cfg, V, F, smap, where)
+    t0 = time.perf_counter()
+    res = scorer.score(poses)
+    dt = time.perf_counter() - t0
+    write_candidates(
+        outputs.candidates_csv,
+        poses,
+        {
+            "score_deg": res.score_deg,
+            "hit_fraction": res.hit_fraction,
+            "seen_fraction": res.seen_fraction,
+        },
+    )
+    if outputs.views_png is not None and cfg.plot_top > 0:
+        from scenebot.score.kernel import summarize
+        from scenebot.score.plots import plot_top_views
+
+        s = np.where(np.isfinite(res.score_deg), res.score_deg, -np.inf)
+        top = np.argsort(-s)[: min(cfg.plot_top, scorer.batch)]
+        top_res = scorer.score(poses[top], return_pixels=True)
+        from scenebot.score.geometry import candidate_views
+
+        depth = scorer.render_depth(candidate_views(poses[top], scorer.intr))
+        plot_top_views(
+            outputs.views_png,
+            depth,
+            top_res.pixels,
+            summarize(top_res.pixels)[0],
+            f"{where}: highest-scoring candidates",
+        )
+    summary = {
+        "candidates": len(poses),
+        "seconds": dt,
+        "evals_per_s": len(poses) / dt if dt > 0 else float("inf"),
+        "arch": scorer.arch,
+        "triangles": int(scorer._faces.shape[0]),
+        "sources": scorer.n_src,
+    }
+    log.info("%s: scored %s", where, summary)
+    return summary
+
+
+@dataclass
+class GoalsInputs:
+    """Inputs of the goals stage."""
+
+    candidates_csv: Path
+    freespace_npz: Path
+
+
+@dataclass
+class GoalsOutputs:
+    """Outputs: ``goals.json`` and an optional heat-map picture."""
+
+    goals_json: Path
+    goals_png: Path | None = None
+
+
+def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> dict:
+    """Choose the goals of the next round and decide whether exploration is complete.
+
+    Returns:
+        The goals.json document.
+    """
+    where = round_name(inputs.candidates_csv, outputs.goals_json)
+    cols = read_candidates(inputs.candidates_csv)
+    poses = np.column_stack([cols["x"], cols["y"], cols["theta"]])
+    if len(poses) == 0:
+        raise FreeSpaceError(
+            f"{where}: {inputs.candidates_csv} holds zero candidates; raise score.n_candidates"
+        )
+    fs = FreeSpace.load(inputs.freespace_npz)
+    valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & fs.contains(poses[:, :2])
+    score = np.where(valid, cols["score_deg"], np.nan)
+    chosen = select_goals(poses, score, cfg.k, cfg.nms_radius_m, cfg.nms_angle_deg, valid)
+    doc = goals_document(
+        poses,
+        score,
+        chosen,
+        cfg.complete_threshold_deg,
+        where,
+        extra={
+            "n_valid": int(valid.sum()),
+            "nms_radius_m": cfg.nms_radius_m,
+            "nms_angle_deg": cfg.nms_angle_deg,
+        },
+    )
+    write_goals(outputs.goals_json, doc)
+    if outputs.goals_png is not None:
+        from scenebot.score.plots import plot_goals
+
+        title = f"{where}: goals (complete={doc['complete']})"
+        plot_goals(outputs.goals_png, fs, poses, score, chosen, title)
+    return doc

@@ -1,0 +1,399 @@
+"""Bring an SfM model into the robot frame: camera centres on z = 0, z up, metres, compass heading.
+
+The robot frame is the odometry frame of round 0: origin where the robot was when it took
+its first photo (minus the camera offset), x axis along compass heading 0, z up. Steps
+(:func:`robot_frame_transform`):
+
+1. **Plane**: robust plane fit to the camera centres (iteratively trimmed SVD); when the
+   centres are nearly collinear the mean camera up vector is the normal. The normal's sign
+   is chosen so that it agrees with the cameras' up vectors (-y axis of OpenCV cameras).
+2. **Heading**: the yaw that best maps the cameras' viewing directions onto the compass
+   headings (robust circular mean), with ``camera_yaw_deg`` for a camera not looking forward.
+3. **Scale**: the camera's offset from the robot's rotation axis from photo pairs of turns
+   in place, then a robust fit of odometry drive distances to the SfM robot displacements
+   (lengths only, so heading drift of odometry from slip on turns does not bias it); see
+   :func:`fit_scale_to_odometry`.
+4. **Translation**: z so that the centres' median height is 0; x, y from the previous
+   round's model (median over shared photos) or from round 0's first photo's odometry.
+
+Only logged odometry/compass and the model itself are used, never the simulator's truth.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import pycolmap
+
+from scenebot.sfm.photos import Photo
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Alignment:
+    """The similarity ``x_robot = scale * R @ x_sfm + t`` and how it was found.
+
+    Attributes:
+        scale: metres per SfM unit.
+        R: (3, 3) rotation.
+        t: (3,) translation (m).
+        scale_source: ``odometry``, ``known_distance``, ``previous_model`` or ``none``.
+        heading_source: ``compass``, ``odometry``, ``previous_model`` or ``first_photo``.
+        camera_offset_m: camera centre in the robot's frame (forward, left) (m) from the
+            odometry fit, or ``None``.
+        stats: fit residuals (plane rms (m), heading residual (deg), odometry residual (m), counts).
+    """
+
+    scale: float
+    R: np.ndarray
+    t: np.ndarray
+    scale_source: str
+    heading_source: str
+    camera_offset_m: tuple[float, float] | None = None
+    stats: dict = field(default_factory=dict)
+
+    def sim3d(self) -> pycolmap.Sim3d:
+        return pycolmap.Sim3d(self.scale, pycolmap.Rotation3d(self.R), self.t.reshape(3, 1))
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["R"] = self.R.tolist()
+        d["t"] = self.t.tolist()
+        return d
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def _rot_to_z(n: np.ndarray) -> np.ndarray:
+    """Rotation (3, 3) taking unit vector ``n`` to +z (Rodrigues)."""
+    z = np.array([0.0, 0.0, 1.0])
+    v = np.cross(n, z)
+    s, c = np.linalg.norm(v), float(n @ z)
+    if s < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    k = v / s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * K @ K
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def fit_plane_normal(centers: np.ndarray, ups: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Robust up direction of the plane through the camera centres.
+
+    Args:
+        centers: (N, 3) camera centres.
+        ups: (N, 3) camera up vectors (unit).
+
+    Returns:
+        Unit normal (3,) pointing the way the cameras' up vectors point, and stats.
+    """
+    mean_up = ups.mean(0)
+    mean_up /= np.linalg.norm(mean_up)
+    keep = np.ones(len(centers), bool)
+    n = mean_up
+    sv = np.zeros(3)
+    for _ in range(4):
+        if keep.sum() < 3:
+            break
+        c0 = np.median(centers[keep], 0)
+        _, sv, vt = np.linalg.svd(centers[keep] - c0, full_matrices=False)
+        n = vt[-1]
+        r = np.abs((centers - c0) @ n)
+        sigma = 1.4826 * np.median(r[keep]) + 1e-12
+        keep = r <= max(3.0 * sigma, 1e-9)
+    degenerate = len(sv) < 2 or sv[1] < 0.05 * sv[0] or keep.sum() < 3
+    if degenerate:
+        n = mean_up
+    if n @ mean_up < 0:
+        n = -n
+    tilt = math.degrees(math.acos(np.clip(float(n @ mean_up), -1, 1)))
+    return n, {"plane_degenerate": bool(degenerate), "camera_up_tilt_deg": tilt}
+
+
+def robust_circular_mean(a: np.ndarray) -> float:
+    """Circular mean of angles ``a`` (rad) after dropping outliers (> 3 robust sigma)."""
+    m = math.atan2(np.sin(a).mean(), np.cos(a).mean())
+    for _ in range(3):
+        r = np.abs(_wrap(a - m))
+        sigma = max(1.4826 * float(np.median(r)), math.radians(0.5))
+        sel = r <= 3 * sigma
+        m = math.atan2(np.sin(a[sel]).mean(), np.cos(a[sel]).mean())
+    return m
+
+
+def fit_scale_to_odometry(
+    dc: np.ndarray, h_i: np.ndarray, h_j: np.ndarray, dp: np.ndarray
+) -> tuple[float, np.ndarray, dict]:
+    """Metric scale and camera offset from consecutive photo pairs.
+
+    Model: ``scale * dc = dr + (R(h_j) - R(h_i)) @ o`` where ``dr`` is the robot's
+    displacement and ``o`` the camera centre in the robot frame. Two robust steps:
+
+    1. pairs where the robot turned in place (``|dp| < 1 cm``) give ``o / scale`` from
+       ``dc = (R(h_j) - R(h_i)) @ (o / scale)`` (Huber IRLS);
+    2. pairs where the robot drove (``|dp| > 5 cm``) give the scale as the ratio of the
+       odometry distance to the SfM robot displacement ``|dc - (R(h_j) - R(h_i)) o/scale|``
+       (distances only: odometry's heading drift from slip on turns does not matter),
+       combined by distance-weighted least squares after rejecting ratios beyond 3 robust
+       sigma.
+
+    Args:
+        dc: (M, 2) SfM camera displacements (SfM units, heading-aligned frame).
+        h_i, h_j: (M,) robot headings (rad) at the two photos.
+        dp: (M, 2) odometry robot displacements (m); only their lengths are used.
+
+    Returns:
+        ``scale`` (m per unit), camera offset ``o`` (2,) in the robot frame (m), stats.
+    """
+    dcos = np.cos(h_j) - np.cos(h_i)
+    dsin = np.sin(h_j) - np.sin(h_i)
+    dist = np.linalg.norm(dp, axis=1)
+    turn = dist < 0.01
+    o_unit = np.zeros(2)
+    if turn.sum() >= 2:
+        A = np.zeros((2 * turn.sum(), 2))
+        A[0::2] = np.stack([dcos[turn], -dsin[turn]], 1)
+        A[1::2] = np.stack([dsin[turn], dcos[turn]], 1)
+        b = dc[turn].reshape(-1)
+        w = np.ones(turn.sum())
+        for _ in range(10):
+            ww = np.repeat(np.sqrt(w), 2)
+            o_unit, *_ = np.linalg.lstsq(A * ww[:, None], b * ww, rcond=None)
+            r = np.linalg.norm((A @ o_unit - b).reshape(-1, 2), axis=1)
+            delta = max(1.4826 * float(np.median(r)) * 1.5, 1e-12)
+            w = np.minimum(1.0, delta / np.maximum(r, 1e-15))
+    move = dist > 0.05
+    if move.sum() < 1:
+        raise ValueError("no photo pair with the robot driving > 5 cm: scale not observable")
+    ro = np.stack([dcos * o_unit[0] - dsin * o_unit[1], dsin * o_unit[0] + dcos * o_unit[1]], 1)
+    dr = np.linalg.norm(dc - ro, axis=1)[move]
+    dm = dist[move]
+    ratio = dm / np.maximum(dr, 1e-15)
+    med = float(np.median(ratio))
+    sigma = max(1.4826 * float(np.median(np.abs(ratio - med))), 1e-3 * med)
+    inl = np.abs(ratio - med) <= 3 * sigma
+    scale = float((dm[inl] * dr[inl]).sum() / (dr[inl] ** 2).sum())
+    stats = {
+        "odometry_pairs": len(dc),
+        "odometry_turn_pairs": int(turn.sum()),
+        "odometry_drive_pairs": int(move.sum()),
+        "odometry_outlier_pairs": int((~inl).sum()),
+        "odometry_distance_residual_median_m": float(np.median(np.abs(scale * dr - dm))),
+    }
+    return scale, scale * o_unit, stats
+
+
+def _camera_geometry(rec: pycolmap.Reconstruction, names: list[str]):
+    by_name = {rec.image(i).name: rec.image(i) for i in rec.reg_image_ids()}
+    C, U, V = [], [], []
+    for n in names:
+        im = by_name[n]
+        R = im.cam_from_world().rotation.matrix()
+        C.append(im.projection_center())
+        U.append(-R[1])
+        V.append(R[2])
+    return np.array(C), np.array(U), np.array(V)
+
+
+def robot_frame_transform(
+    rec: pycolmap.Reconstruction,
+    photos: list[Photo],
+    *,
+    camera_yaw_deg: float = 0.0,
+    use_compass: bool = True,
+    min_odometry_pairs: int = 5,
+    known_distance: tuple[str, str, float] | None = None,
+    previous: pycolmap.Reconstruction | None = None,
+) -> Alignment:
+    """The similarity from the model's frame to the robot frame (see module docstring).
+
+    Args:
+        rec: the SfM model (any frame).
+        photos: the photos (odometry, compass) of the set; unregistered ones are ignored.
+        camera_yaw_deg: yaw of the camera relative to the robot's forward axis.
+        use_compass: heading from the compass (else odometry theta, else the first photo).
+        min_odometry_pairs: consecutive photo pairs needed for the odometry scale fit.
+        known_distance: ``(name_a, name_b, metres)`` for photo sets without odometry.
+        previous: round r-1's aligned model: x, y anchored to its shared photos (and scale
+            taken from it when this set has too little odometry).
+
+    Returns:
+        The alignment.
+    """
+    reg = {rec.image(i).name for i in rec.reg_image_ids()}
+    ph = [p for p in photos if p.name in reg]
+    if len(ph) < 2:
+        raise ValueError("need at least 2 registered photos to align the model")
+    C, U, V = _camera_geometry(rec, [p.name for p in ph])
+    prev_c = {}
+    if previous is not None:
+        prev_c = {
+            previous.image(i).name: previous.image(i).projection_center()
+            for i in previous.reg_image_ids()
+        }
+    return fit_robot_frame(
+        ph,
+        C,
+        U,
+        V,
+        camera_yaw_deg=camera_yaw_deg,
+        use_compass=use_compass,
+        min_odometry_pairs=min_odometry_pairs,
+        known_distance=known_distance,
+        previous_centers=prev_c,
+    )
+
+
+def fit_robot_frame(
+    ph: list[Photo],
+    C: np.ndarray,
+    U: np.ndarray,
+    V: np.ndarray,
+    *,
+    camera_yaw_deg: float = 0.0,
+    use_compass: bool = True,
+    min_odometry_pairs: int = 5,
+    known_distance: tuple[str, str, float] | None = None,
+    previous_centers: dict[str, np.ndarray] | None = None,
+) -> Alignment:
+    """The robot-frame similarity from camera geometry arrays (core of
+    :func:`robot_frame_transform`).
+
+    Args:
+        ph: the registered photos, (N,).
+        C: (N, 3) camera centres, model frame.
+        U: (N, 3) camera up vectors (-y axis of the OpenCV camera), model frame.
+        V: (N, 3) viewing directions (+z axis of the camera), model frame.
+        previous_centers: photo name -> (3,) centre in the previous round's robot frame.
+
+    Returns:
+        The alignment.
+    """
+    names = [p.name for p in ph]
+    stats: dict = {}
+    prev_c = previous_centers or {}
+
+    # 1. plane
+    n, pstats = fit_plane_normal(C, U)
+    stats.update(pstats)
+    R1 = _rot_to_z(n)
+    V1 = V @ R1.T
+    cam_yaw = math.radians(camera_yaw_deg)
+    psi = np.arctan2(V1[:, 1], V1[:, 0]) - cam_yaw  # robot headings, model frame
+
+    # 2. heading
+    compass = np.array([np.nan if p.compass_deg is None else p.compass_deg for p in ph])
+    odo_theta = np.array([np.nan if p.odometry is None else p.odometry[2] for p in ph])
+    has_c = ~np.isnan(compass)
+    has_o = ~np.isnan(odo_theta)
+    if use_compass and has_c.sum() >= 2:
+        yaw = robust_circular_mean(_wrap(np.radians(compass[has_c]) - psi[has_c]))
+        heading_source = "compass"
+        resid = _wrap(np.radians(compass[has_c]) - psi[has_c] - yaw)
+        stats["compass_residual_median_deg"] = float(np.degrees(np.median(np.abs(resid))))
+    elif has_o.sum() >= 2:
+        yaw = robust_circular_mean(_wrap(odo_theta[has_o] - psi[has_o]))
+        heading_source = "odometry"
+    else:
+        yaw = -float(psi[0])
+        heading_source = "first_photo"
+    Rz = _rot_z(yaw)
+    R = Rz @ R1
+    C2 = C @ R.T
+    h = _wrap(psi + yaw)  # robot headings in the robot frame
+
+    # 3. scale
+    scale, scale_source, offset = 1.0, "none", None
+    idx = {nm: k for k, nm in enumerate(names)}
+    rows = []
+    by_round: dict[int, list[Photo]] = {}
+    for p in ph:
+        if p.odometry is not None:
+            by_round.setdefault(p.round, []).append(p)
+    for members in by_round.values():
+        members.sort(key=lambda p: p.index)
+        for a, b in itertools.pairwise(members):
+            i, j = idx[a.name], idx[b.name]
+            dp = np.subtract(b.odometry[:2], a.odometry[:2])
+            rows.append((C2[j, :2] - C2[i, :2], h[i], h[j], dp))
+    moving = sum(np.linalg.norm(r[3]) > 0.05 for r in rows)
+    if known_distance is not None:
+        a, b, dist = known_distance
+        if a not in idx or b not in idx:
+            raise ValueError(
+                f"sfm.known_distance names photos {a!r}, {b!r}; not both registered "
+                f"(registered: {len(names)} photos)"
+            )
+        scale = dist / float(np.linalg.norm(C2[idx[a]] - C2[idx[b]]))
+        scale_source = "known_distance"
+    elif len(rows) >= min_odometry_pairs and moving >= 2:
+        dc, hi, hj, dp = (np.array(x) for x in zip(*rows, strict=True))
+        scale, o, ostats = fit_scale_to_odometry(dc, hi, hj, dp)
+        stats.update(ostats)
+        if not scale > 0:
+            raise ValueError(
+                f"odometry scale fit gave {scale:.3g}: odometry and SfM disagree; check the "
+                "capture log's odometry"
+            )
+        scale_source, offset = "odometry", (float(o[0]), float(o[1]))
+    elif prev_c:
+        scale_source = "previous_model"
+    else:
+        log.warning(
+            "no metric scale: %d consecutive odometry pairs (%d moving), no "
+            "sfm.known_distance; the model keeps SfM units (scale 1)",
+            len(rows),
+            moving,
+        )
+    C3 = scale * C2
+
+    # 4. translation
+    t = np.zeros(3)
+    t[2] = -float(np.median(C3[:, 2]))
+    shared = [k for k, nm in enumerate(names) if nm in prev_c]
+    if len(shared) >= 2:
+        P = np.array([prev_c[names[k]] for k in shared])
+        if scale_source in ("previous_model", "none"):
+            # scale from the spread of shared centres about their medians
+            d_new = np.linalg.norm(C2[shared] - np.median(C2[shared], 0), axis=1)
+            d_old = np.linalg.norm(P - np.median(P, 0), axis=1)
+            if np.median(d_new) > 0:
+                scale = float(np.median(d_old) / np.median(d_new))
+                scale_source = "previous_model"
+            C3 = scale * C2
+            t[2] = -float(np.median(C3[:, 2]))
+        t[:2] = np.median(P[:, :2] - C3[shared, :2], 0)
+        stats["anchor"] = f"previous_model ({len(shared)} shared photos)"
+    else:
+        r0 = [k for k, p in enumerate(ph) if p.odometry is not None and p.round == 0]
+        if r0:
+            k = min(r0, key=lambda k: ph[k].index)
+            robot_xy = C3[k, :2]
+            if offset is not None:
+                robot_xy = robot_xy - _rot_z(h[k])[:2, :2] @ np.asarray(offset)
+            t[:2] = np.asarray(ph[k].odometry[:2]) - robot_xy
+            stats["anchor"] = f"odometry of {ph[k].name}"
+        else:
+            t[:2] = -C3[0, :2]
+            stats["anchor"] = f"first photo {ph[0].name} at the origin"
+    z_res = C3[:, 2] + t[2]
+    stats["plane_rms_m" if scale_source != "none" else "plane_rms_units"] = float(
+        np.sqrt(np.mean(z_res**2))
+    )
+    return Alignment(scale, R, t, scale_source, heading_source, offset, stats)
+
+
+def align_to_robot_frame(rec: pycolmap.Reconstruction, alignment: Alignment) -> None:
+    """Apply ``alignment`` to ``rec`` in place (images and points)."""
+    rec.transform(alignment.sim3d())

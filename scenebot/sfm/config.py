@@ -1,0 +1,154 @@
+"""Configuration of the sfm stage (merged by the lead into the single campaign config)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class KnownDistance(BaseModel):
+    """A known distance between the camera centres of two photos (bring-your-own photos)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    image_a: str = Field(description="File name of the first photo (as in the photo folder).")
+    image_b: str = Field(description="File name of the second photo.")
+    distance_m: float = Field(gt=0.0, description="Distance between their camera centres (m).")
+
+
+class SfmConfig(BaseModel):
+    """Settings of structure from motion (``scenebot.sfm.stage.run``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    # --- features -------------------------------------------------------------------------
+    max_num_features: int = Field(
+        4096, ge=256, description="SIFT features kept per photo (pycolmap extraction)."
+    )
+    max_image_size: int = Field(
+        1600, ge=64, description="Photos are downscaled to this longest side (px) for SIFT."
+    )
+    peak_threshold: float = Field(
+        0.0067,
+        gt=0.0,
+        description=(
+            "SIFT contrast threshold (pycolmap default 0.0067); lower finds more features "
+            "on low-contrast surfaces and small photos."
+        ),
+    )
+    domain_size_pooling: bool = Field(
+        False,
+        description="DSP-SIFT (pycolmap's domain-size pooling): steadier descriptors, slower.",
+    )
+    fallback_focal_factor: float = Field(
+        1.2,
+        gt=0.1,
+        description=(
+            "Focal length (px) assumed for photos whose EXIF has no usable focal, as a factor "
+            "of the longest image side (COLMAP's default 1.2); refined by bundle adjustment."
+        ),
+    )
+    camera_model: str = Field(
+        "SIMPLE_RADIAL", description="COLMAP camera model of every camera (SIMPLE_RADIAL, ...)."
+    )
+    num_threads: int = Field(-1, description="Threads for extraction/matching/mapping (-1: all).")
+
+    # --- pairs ----------------------------------------------------------------------------
+    exhaustive_max_images: int = Field(
+        40, ge=0, description="Photo sets up to this size are matched exhaustively (all pairs)."
+    )
+    spatial_neighbors: int = Field(
+        20, ge=0, description="Nearest photos by logged position (odometry/localization) per photo."
+    )
+    spatial_max_distance_m: float = Field(
+        3.0, gt=0.0, description="Spatial neighbours farther than this (m) are not paired."
+    )
+    sequential_overlap: int = Field(
+        5, ge=0, description="Each photo is paired with the next N photos of the same round."
+    )
+    loop_closure_pairs: int = Field(
+        3, ge=0, description="Long-range candidate pairs per photo (evenly spread over the set)."
+    )
+    min_num_matches: int = Field(
+        15, ge=5, description="Minimum verified inlier matches for a pair to be used in mapping."
+    )
+
+    # --- mapping --------------------------------------------------------------------------
+    incremental: bool = Field(
+        True,
+        description=(
+            "Round r > 0 starts from round r-1's model and registers only the new photos "
+            "(from-scratch fallback when too few register)."
+        ),
+    )
+    min_registered_share: float = Field(
+        0.8,
+        ge=0.0,
+        le=1.0,
+        description="Fail with a clear message when fewer than this share of photos registers.",
+    )
+    random_seed: int = Field(0, description="Seed for pycolmap's RANSAC and pair sampling.")
+    global_ba_ratio: float = Field(
+        1.1,
+        ge=1.01,
+        description=(
+            "Incremental mapping runs a global bundle adjustment whenever the model grew by "
+            "this factor (COLMAP default 1.1; 1.5 maps about twice as fast, slightly less "
+            "accurately before refinement)."
+        ),
+    )
+    update_global_ba_ratio: float = Field(
+        3.0,
+        ge=1.01,
+        description=(
+            "Like global_ba_ratio, when continuing from the previous round's model: the old "
+            "photos are already adjusted, and the final refinement adjusts everything."
+        ),
+    )
+    update_fix_existing: bool = Field(
+        True,
+        description=(
+            "Keep the previous round's poses fixed while registering new photos (faster); "
+            "the final refinement still adjusts all poses."
+        ),
+    )
+    retriangulate: bool = Field(
+        True,
+        description=(
+            "After mapping, re-triangulate all tracks from the database with the registered "
+            "poses (full tracks; removes the previous round's pruning) before refinement."
+        ),
+    )
+    refine_iterations: int = Field(
+        3,
+        ge=0,
+        description=(
+            "Rounds of the final robust refinement (drop observations beyond "
+            "refine_max_error_px, Cauchy-loss global bundle adjustment); 0 = off."
+        ),
+    )
+    refine_max_error_px: float = Field(
+        1.0, gt=0.0, description="Reprojection error (px) beyond which observations are dropped."
+    )
+
+    # --- robot frame ----------------------------------------------------------------------
+    camera_yaw_deg: float = Field(
+        0.0,
+        description=(
+            "Yaw of the camera's optical axis relative to the robot's forward axis (deg, "
+            "counter-clockwise); 0 = the camera looks where the robot drives."
+        ),
+    )
+    use_compass: bool = Field(True, description="Heading of the robot frame from the compass.")
+    min_odometry_pairs: int = Field(
+        5, ge=2, description="Consecutive photo pairs needed to fit the metric scale to odometry."
+    )
+    known_distance: KnownDistance | None = Field(
+        None,
+        description=(
+            "Bring-your-own photos: a measured distance between two camera centres sets the "
+            "metric scale (otherwise scale 1, arbitrary units)."
+        ),
+    )
+
+    # --- outputs --------------------------------------------------------------------------
+    plots: bool = Field(True, description="Write map.png and accuracy histograms.")

@@ -1,0 +1,132 @@
+"""Accuracy of the map against the simulator's true poses (paper section V.B, Fig. 5b).
+
+A similarity transform (Umeyama, least squares) maps the SfM camera centres onto the true
+centres; the position error of each photo is split along the true line of sight and
+transverse to it (stereo is least accurate along the line of sight); the heading error is
+the difference of the viewing directions' yaw after the similarity's rotation. Because the
+model is meant to be metric, the similarity's scale is also the metric scale error.
+Truth is read only here, for evaluation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pycolmap
+
+M_PER_INCH = 0.0254
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Least-squares similarity ``dst ~ s * R @ src + t`` (Umeyama 1991).
+
+    Args:
+        src, dst: (N, 3) corresponding points, N >= 3 not collinear.
+
+    Returns:
+        ``s`` (float), ``R`` (3, 3) proper rotation, ``t`` (3,).
+    """
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    xs, xd = src - mu_s, dst - mu_d
+    cov = xd.T @ xs / len(src)
+    U, D, Vt = np.linalg.svd(cov)
+    S = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        S[2, 2] = -1
+    R = U @ S @ Vt
+    var_s = (xs**2).sum() / len(src)
+    s = float(np.trace(np.diag(D) @ S) / var_s)
+    t = mu_d - s * R @ mu_s
+    return s, R, t
+
+
+def _stats(x: np.ndarray) -> dict[str, float]:
+    if len(x) == 0:
+        return {}
+    return {
+        "median": float(np.median(x)),
+        "mean": float(np.mean(x)),
+        "p90": float(np.percentile(x, 90)),
+        "max": float(np.max(x)),
+    }
+
+
+def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> dict:
+    """Accuracy of the registered cameras against true poses.
+
+    Args:
+        rec: the model (robot frame).
+        truths: photo name -> ``truth`` record of the capture log (``center`` (3,) m,
+            ``R_cam_from_world`` 9 row-major).
+
+    Returns:
+        The content of ``accuracy.json``: per-photo errors and summaries in metres, inches,
+        centimetres and degrees, the similarity, and the metric scale error.
+    """
+    names, est_c, est_v, true_c, true_v, true_r, est_r = [], [], [], [], [], [], []
+    for iid in rec.reg_image_ids():
+        im = rec.image(iid)
+        tr = truths.get(im.name)
+        if not tr or "center" not in tr or "R_cam_from_world" not in tr:
+            continue
+        R_est = im.cam_from_world().rotation.matrix()
+        R_true = np.asarray(tr["R_cam_from_world"], float).reshape(3, 3)
+        names.append(im.name)
+        est_c.append(im.projection_center())
+        est_v.append(R_est[2])
+        est_r.append(R_est)
+        true_c.append(np.asarray(tr["center"], float))
+        true_v.append(R_true[2])
+        true_r.append(R_true)
+    if len(names) < 3:
+        return {"evaluated": len(names), "note": "fewer than 3 registered photos with truth"}
+    est_c, true_c = np.array(est_c), np.array(true_c)
+    s, R, t = umeyama(est_c, true_c)
+    mapped = s * est_c @ R.T + t
+    err = mapped - true_c
+    tv = np.array(true_v)
+    los = np.abs((err * tv).sum(1))
+    transverse = np.linalg.norm(err - (err * tv).sum(1, keepdims=True) * tv, axis=1)
+    total = np.linalg.norm(err, axis=1)
+    ev = np.array(est_v) @ R.T
+    yaw_e = np.arctan2(ev[:, 1], ev[:, 0])
+    yaw_t = np.arctan2(tv[:, 1], tv[:, 0])
+    heading = np.degrees(np.abs((yaw_e - yaw_t + np.pi) % (2 * np.pi) - np.pi))
+    rot_err = []
+    for Re, Rt in zip(est_r, true_r, strict=True):
+        # camera orientation in the true world: R_cam_from_world_est @ R^T
+        dR = (Re @ R.T) @ Rt.T
+        rot_err.append(math.degrees(math.acos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
+    rot_err = np.array(rot_err)
+    # tilt between the robot frame's z and the world's z, and the robot frame's yaw
+    z_in_world = R @ np.array([0.0, 0.0, 1.0])
+    tilt = math.degrees(math.acos(np.clip(z_in_world[2], -1, 1)))
+    x_in_world = R @ np.array([1.0, 0.0, 0.0])
+    frame_yaw = math.degrees(math.atan2(x_in_world[1], x_in_world[0]))
+    out = {
+        "evaluated": len(names),
+        "registered": rec.num_reg_images(),
+        "similarity": {"scale": s, "R": R.tolist(), "t": t.tolist()},
+        "metric_scale_error": abs(1.0 / s - 1.0),
+        "frame_tilt_deg": tilt,
+        "frame_yaw_in_world_deg": frame_yaw,
+        "position_error_m": _stats(total),
+        "line_of_sight_error_m": _stats(los),
+        "transverse_error_m": _stats(transverse),
+        "position_error_cm": _stats(total * 100),
+        "position_error_in": _stats(total / M_PER_INCH),
+        "heading_error_deg": _stats(heading),
+        "rotation_error_deg": _stats(rot_err),
+        "per_photo": [
+            {
+                "name": n,
+                "position_error_m": float(a),
+                "line_of_sight_m": float(b),
+                "transverse_m": float(c),
+                "heading_error_deg": float(d),
+            }
+            for n, a, b, c, d in zip(names, total, los, transverse, heading, strict=True)
+        ],
+    }
+    return out

@@ -1,0 +1,292 @@
+"""Incremental mapping (pycolmap), from scratch or continuing a previous round's model."""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from scenebot.sfm.config import SfmConfig
+from scenebot.sfm.features import open_database
+
+log = logging.getLogger(__name__)
+
+
+class SfmError(RuntimeError):
+    """The photo set did not give a usable map; the message names the photos and the fix."""
+
+
+@dataclass
+class MappingResult:
+    """The kept model and what happened to every photo.
+
+    Attributes:
+        reconstruction: the largest model.
+        mode: ``"scratch"``, ``"incremental"`` or ``"incremental->scratch"`` (fallback).
+        num_models: how many models mapping produced.
+        dropped: photo name -> reason, for photos not in the kept model.
+        seconds: wall time of mapping.
+        refinement: stats of the final robust refinement (empty when off).
+    """
+
+    reconstruction: pycolmap.Reconstruction
+    mode: str
+    num_models: int
+    dropped: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0
+    refinement: dict = field(default_factory=dict)
+
+
+def filter_observations(rec: pycolmap.Reconstruction, max_error_px: float) -> int:
+    """Delete observations whose reprojection error exceeds ``max_error_px`` (px) and points
+    that are not finite or lie far outside the cameras' extent.
+
+    Returns:
+        The number of observations deleted.
+    """
+    centers = np.array([rec.image(i).projection_center() for i in rec.reg_image_ids()])
+    mid = np.median(centers, 0)
+    extent = max(float(np.max(np.linalg.norm(centers - mid, axis=1))), 1e-9)
+    far = [
+        pid
+        for pid, pt in rec.points3D.items()
+        if not np.all(np.isfinite(pt.xyz)) or np.linalg.norm(pt.xyz - mid) > 1000 * extent
+    ]
+    for pid in far:
+        rec.delete_point3D(pid)
+    bad: list[tuple[int, int]] = []
+    for iid in rec.reg_image_ids():
+        im = rec.image(iid)
+        idx = [k for k, p2 in enumerate(im.points2D) if p2.has_point3D()]
+        if not idx:
+            continue
+        xyz = np.array([rec.point3D(im.points2D[k].point3D_id).xyz for k in idx])
+        cam_pts = im.cam_from_world() * xyz
+        uv = im.camera.img_from_cam(cam_pts, check_cheirality=False)
+        obs = np.array([im.points2D[k].xy for k in idx])
+        err = np.linalg.norm(uv - obs, axis=1)
+        err[cam_pts[:, 2] <= 0] = np.inf
+        bad += [(iid, idx[k]) for k in np.flatnonzero(~(err <= max_error_px))]
+    for iid, k in bad:
+        if rec.image(iid).points2D[k].has_point3D():
+            rec.delete_observation(iid, k)
+    return len(bad) + len(far)
+
+
+def robust_refinement(
+    rec: pycolmap.Reconstruction,
+    max_error_px: float,
+    iterations: int,
+    num_threads: int = -1,
+    relax_first: bool = False,
+) -> dict:
+    """Final robust bundle adjustment: drop observations beyond ``max_error_px``, then
+    global BA with a Cauchy loss (scale 1 px), ``iterations`` times, and filter once more.
+
+    COLMAP's incremental mapper keeps observations up to 4 px with a squared loss; in scenes
+    with view-dependent features (highlights, occlusion corners) those bend the camera
+    trajectory by centimetres. Returns stats (observations removed, reprojection error px).
+    """
+    before = rec.compute_mean_reprojection_error()
+    removed = 0
+    if relax_first:
+        opts = pycolmap.BundleAdjustmentOptions()
+        opts.print_summary = False
+        opts.ceres.solver_options.num_threads = num_threads
+        pycolmap.bundle_adjustment(rec, opts)
+    for _ in range(iterations):
+        removed += filter_observations(rec, max_error_px)
+        opts = pycolmap.BundleAdjustmentOptions()
+        opts.print_summary = False
+        opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+        opts.ceres.loss_function_scale = 1.0
+        opts.ceres.solver_options.num_threads = num_threads
+        pycolmap.bundle_adjustment(rec, opts)
+    removed += filter_observations(rec, max_error_px)
+    return {
+        "observations_removed": removed,
+        "reprojection_error_before_px": before,
+        "reprojection_error_after_px": rec.compute_mean_reprojection_error(),
+    }
+
+
+def _options(
+    cfg: SfmConfig, names: list[str], continuing: bool = False
+) -> pycolmap.IncrementalPipelineOptions:
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.num_threads = cfg.num_threads
+    opts.random_seed = cfg.random_seed
+    opts.min_num_matches = cfg.min_num_matches
+    opts.image_names = list(names)
+    opts.multiple_models = True
+    opts.extract_colors = True
+    ratio = cfg.update_global_ba_ratio if continuing else cfg.global_ba_ratio
+    opts.ba_global_frames_ratio = ratio
+    opts.ba_global_points_ratio = ratio
+    if continuing:
+        opts.fix_existing_frames = cfg.update_fix_existing
+    return opts
+
+
+def _run(
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    cfg: SfmConfig,
+    names: list[str],
+    input_model: pycolmap.Reconstruction | None,
+) -> dict[int, pycolmap.Reconstruction]:
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    input_path = ""
+    if input_model is not None:
+        input_path = work / "input"
+        input_path.mkdir()
+        input_model.write_binary(str(input_path))
+    out = work / "models"
+    out.mkdir()
+    return pycolmap.incremental_mapping(
+        str(db_path),
+        str(image_root),
+        str(out),
+        options=_options(cfg, names, continuing=input_model is not None),
+        input_path=str(input_path),
+    )
+
+
+def _reasons(db_path: Path, names: list[str], kept: set[str], others: set[str], cfg) -> dict:
+    """Why each photo outside the kept model dropped."""
+    dropped: dict[str, str] = {}
+    with open_database(db_path) as db:
+        ids = {im.name: im.image_id for im in db.read_all_images()}
+        pair_ids, inliers = db.read_two_view_geometry_num_inliers()
+        good: dict[int, int] = {}
+        for pid, n in zip(pair_ids, inliers, strict=True):
+            if n < cfg.min_num_matches:
+                continue
+            a, b = pycolmap.pair_id_to_image_pair(pid)
+            good[a] = good.get(a, 0) + 1
+            good[b] = good.get(b, 0) + 1
+        for name in names:
+            if name in kept:
+                continue
+            iid = ids.get(name)
+            if iid is None or db.num_keypoints_for_image(iid) == 0:
+                dropped[name] = "no SIFT features (blank, dark or unreadable photo)"
+            elif good.get(iid, 0) == 0:
+                dropped[name] = (
+                    "no verified matches with any paired photo (too little overlap or texture)"
+                )
+            elif name in others:
+                dropped[name] = "in a separate, smaller model (no overlap with the main part)"
+            else:
+                dropped[name] = f"could not be registered ({good[iid]} matched pairs)"
+    return dropped
+
+
+def map_photos(
+    db_path: Path,
+    image_root: Path,
+    names: list[str],
+    work: Path,
+    cfg: SfmConfig,
+    previous: pycolmap.Reconstruction | None = None,
+) -> MappingResult:
+    """Map the photos ``names``; keep the largest model.
+
+    With ``previous`` (round r-1's model, same database) and ``cfg.incremental``, mapping
+    continues from it: the new photos are registered, then bundle adjustment refines all.
+    When fewer than ``cfg.min_registered_share`` of the photos register that way, mapping
+    runs again from scratch.
+
+    Args:
+        db_path: the scene database (features and matches of all ``names``).
+        image_root: folder the names are relative to (for point colours).
+        names: photos to map.
+        work: scratch folder (replaced).
+        cfg: sfm settings.
+        previous: model to continue from, or ``None``.
+
+    Returns:
+        The kept model and the dropped photos with reasons.
+    """
+    t0 = time.perf_counter()
+    mode = "scratch"
+    models: dict[int, pycolmap.Reconstruction] = {}
+    if previous is not None and cfg.incremental:
+        prev = pycolmap.Reconstruction(previous)
+        keep = set(names)
+        for iid in list(prev.reg_image_ids()):
+            if prev.image(iid).name not in keep:
+                prev.deregister_frame(prev.image(iid).frame_id)
+        mode = "incremental"
+        try:
+            models = _run(db_path, image_root, work, cfg, names, prev)
+        except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
+            log.warning("incremental mapping from the previous model failed (%s)", exc)
+            models = {}
+        best = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
+        if best is None or best.num_reg_images() < cfg.min_registered_share * len(names):
+            log.warning(
+                "incremental mapping registered %d of %d photos: mapping from scratch",
+                0 if best is None else best.num_reg_images(),
+                len(names),
+            )
+            mode = "incremental->scratch"
+            models = {}
+    if not models:
+        models = _run(db_path, image_root, work, cfg, names, None)
+    if not models:
+        dropped = _reasons(db_path, names, set(), set(), cfg)
+        raise SfmError(
+            "mapping found no model: no initial pair of photos with enough verified matches. "
+            "Photos need overlap and texture; first photos without matches: "
+            + ", ".join(list(dropped)[:10])
+        )
+    ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+    best = ranked[0]
+    kept = {best.image(i).name for i in best.reg_image_ids()}
+    others = {r.image(i).name for r in ranked[1:] for i in r.reg_image_ids()} - kept
+    dropped = _reasons(db_path, names, kept, others, cfg)
+    if len(ranked) > 1:
+        log.warning(
+            "mapping split into %d models (%s photos); keeping the largest",
+            len(ranked),
+            "/".join(str(r.num_reg_images()) for r in ranked),
+        )
+    if cfg.retriangulate:
+        # Re-triangulate every track from the database with the registered poses:
+        # incremental mapping leaves tracks split and pruned for intermediate geometry (and
+        # a previous round's model keeps its own deformations in its tracks); full tracks
+        # let the final refinement straighten the model (pycolmap's point triangulator).
+        t1 = time.perf_counter()
+        tri_dir = work / "retriangulated"
+        tri_dir.mkdir(parents=True, exist_ok=True)
+        best = pycolmap.triangulate_points(
+            best,
+            str(db_path),
+            str(image_root),
+            str(tri_dir),
+            clear_points=True,
+            options=_options(cfg, names),
+            refine_intrinsics=True,
+        )
+        log.info("re-triangulated the model in %.1f s", time.perf_counter() - t1)
+    refinement = {}
+    if cfg.refine_iterations > 0:
+        t1 = time.perf_counter()
+        refinement = robust_refinement(
+            best,
+            cfg.refine_max_error_px,
+            cfg.refine_iterations,
+            cfg.num_threads,
+            relax_first=False,
+        )
+        refinement["seconds"] = time.perf_counter() - t1
+    return MappingResult(best, mode, len(ranked), dropped, time.perf_counter() - t0, refinement)

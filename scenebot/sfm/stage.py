@@ -1,0 +1,315 @@
+"""The sfm stage: ``run(cfg, inputs, outputs)``.
+
+Round r: a COLMAP model of ALL photos of rounds 0..r in the robot frame, written to
+``results/{scene}/round_{r}/sfm/`` with ``point_descriptors.npz``, ``report.json``,
+``accuracy.json`` (+ ``accuracy.png``) and ``map.png``. Features and matches live in one
+persistent database per scene (``results/{scene}/sfm_db/database.db`` in the workflow), so a
+round extracts features only of its new photos and matches only new pairs; mapping continues
+from round r-1's model (``inputs.previous_model``) with a from-scratch fallback.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from scenebot.sfm.align import align_to_robot_frame, robot_frame_transform
+from scenebot.sfm.config import SfmConfig
+from scenebot.sfm.descriptors import collect_point_descriptors, write_point_descriptors
+from scenebot.sfm.evaluate import evaluate_accuracy
+from scenebot.sfm.features import check_database_photos, extract, match_pairs, open_database
+from scenebot.sfm.mapping import SfmError, map_photos
+from scenebot.sfm.pairs import PairPrior, select_pairs
+from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
+
+log = logging.getLogger(__name__)
+
+MODEL_FILES = ("cameras.bin", "images.bin", "points3D.bin")
+
+
+@dataclass
+class SfmInputs:
+    """Inputs of the sfm stage.
+
+    Attributes:
+        database: the scene's persistent COLMAP database (created if missing), e.g.
+            ``results/{scene}/sfm_db/database.db``.
+        capture_dirs: ``round_{k}/capture`` folders of rounds 0..r, in order (robot rounds).
+        photo_folder: bring-your-own photos (``robot: photos``) instead of capture folders.
+        previous_model: round r-1's ``sfm`` folder to continue from, or ``None``.
+    """
+
+    database: Path
+    capture_dirs: list[Path] = field(default_factory=list)
+    photo_folder: Path | None = None
+    previous_model: Path | None = None
+
+
+@dataclass
+class SfmOutputs:
+    """Outputs: ``model_dir`` receives the model, descriptors, report, accuracy and plots."""
+
+    model_dir: Path
+
+    @property
+    def descriptors(self) -> Path:
+        return self.model_dir / "point_descriptors.npz"
+
+    @property
+    def report(self) -> Path:
+        return self.model_dir / "report.json"
+
+    @property
+    def accuracy(self) -> Path:
+        return self.model_dir / "accuracy.json"
+
+    @property
+    def accuracy_png(self) -> Path:
+        return self.model_dir / "accuracy.png"
+
+    @property
+    def map_png(self) -> Path:
+        return self.model_dir / "map.png"
+
+
+def inputs_for_round(
+    scene_dir: Path, round_index: int, photo_folder: Path | None = None
+) -> tuple[SfmInputs, SfmOutputs]:
+    """The workflow's standard inputs and outputs of round ``round_index``.
+
+    Layout: ``scene_dir/round_{k:03d}/capture`` for k = 0..r, the database
+    ``scene_dir/sfm_db/database.db``, round r-1's model ``scene_dir/round_{r-1:03d}/sfm``
+    (used when it exists), output ``scene_dir/round_{r:03d}/sfm``. With ``photo_folder``
+    (``robot: photos``), round 0 is made from that folder.
+    """
+    scene_dir = Path(scene_dir)
+    prev = scene_dir / f"round_{round_index - 1:03d}" / "sfm"
+    inputs = SfmInputs(
+        database=scene_dir / "sfm_db" / "database.db",
+        capture_dirs=[scene_dir / f"round_{k:03d}" / "capture" for k in range(round_index + 1)]
+        if photo_folder is None
+        else [],
+        photo_folder=photo_folder,
+        previous_model=prev if round_index > 0 and (prev / "images.bin").exists() else None,
+    )
+    return inputs, SfmOutputs(scene_dir / f"round_{round_index:03d}" / "sfm")
+
+
+def _priors(photos: list[Photo], previous: pycolmap.Reconstruction | None) -> list[PairPrior]:
+    prev = {}
+    if previous is not None:
+        for iid in previous.reg_image_ids():
+            im = previous.image(iid)
+            v = im.cam_from_world().rotation.matrix()[2]
+            prev[im.name] = (im.projection_center()[:2], math.atan2(v[1], v[0]))
+    out = []
+    for p in photos:
+        heading = None
+        if p.compass_deg is not None:
+            heading = math.radians(p.compass_deg)
+        elif p.odometry is not None:
+            heading = p.odometry[2]
+        frame, xy = None, None
+        if p.name in prev:
+            frame, xy, heading = "robot", tuple(prev[p.name][0]), prev[p.name][1]
+        elif p.localization is not None:
+            frame, xy = "robot", p.localization[:2]
+            heading = p.localization[2] if heading is None else heading
+        elif p.odometry is not None:
+            frame, xy = f"odometry_{p.round}", p.odometry[:2]
+        out.append(PairPrior(p.name, p.round, p.index, frame, xy, heading))
+    return out
+
+
+def _usable_previous(
+    previous: pycolmap.Reconstruction | None, db_path: Path
+) -> pycolmap.Reconstruction | None:
+    """``previous`` if its image ids are those of the database, else ``None`` (logged)."""
+    if previous is None:
+        return None
+    if not Path(db_path).exists():
+        log.warning("no database %s: mapping from scratch, not from the previous model", db_path)
+        return None
+    with open_database(db_path) as db:
+        for iid in previous.reg_image_ids():
+            im = db.read_image_with_name(previous.image(iid).name)
+            if im is None or im.image_id != iid:
+                log.warning(
+                    "previous model and database %s disagree on %s: mapping from scratch",
+                    db_path,
+                    previous.image(iid).name,
+                )
+                return None
+    return previous
+
+
+def write_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
+    """Write ``rec`` as a COLMAP binary model into ``model_dir`` (created)."""
+    model_dir.mkdir(parents=True, exist_ok=True)
+    rec.write_binary(str(model_dir))
+
+
+def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
+    """Run structure from motion on all photos of the inputs.
+
+    Args:
+        cfg: sfm settings.
+        inputs: database, capture folders (or a photo folder), previous round's model.
+        outputs: where to write.
+
+    Returns:
+        The report (also written to ``report.json``): counts, dropped photos with reasons,
+        pair counts, timings (s), alignment, accuracy summary.
+
+    Raises:
+        PhotoError: fewer than 3 photos, corrupt or truncated JPEGs (named).
+        SfmError: fewer than ``cfg.min_registered_share`` of the photos registered (named).
+    """
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    if inputs.photo_folder is not None:
+        root, photos = photos_from_folder(inputs.photo_folder)
+    else:
+        if not inputs.capture_dirs:
+            raise SfmError("sfm needs capture folders or a photo folder (robot: photos)")
+        root, photos = photos_from_captures(inputs.capture_dirs)
+    t = time.perf_counter()
+    check_photos(photos, cfg.fallback_focal_factor)
+    timings["check_photos"] = time.perf_counter() - t
+
+    db_path = Path(inputs.database)
+    work = db_path.parent / "work"
+    previous = None
+    if inputs.previous_model is not None:
+        prev_dir = Path(inputs.previous_model)
+        if not all((prev_dir / f).is_file() for f in MODEL_FILES):
+            raise SfmError(
+                f"previous model {prev_dir} has no COLMAP model ({', '.join(MODEL_FILES)})"
+            )
+        previous = pycolmap.Reconstruction(str(prev_dir))
+
+    if check_database_photos(db_path, photos) and previous is not None:
+        log.warning("database reset: mapping from scratch instead of from %s", prev_dir)
+        previous = None
+    previous = _usable_previous(previous, db_path)
+    ext = extract(db_path, root, photos, cfg)
+    timings["extract"] = ext["seconds"]
+    log.info("features: %d new photos, %d reused", ext["new"], ext["reused"])
+
+    pairs = select_pairs(
+        _priors(photos, previous),
+        exhaustive_max_images=cfg.exhaustive_max_images,
+        spatial_neighbors=cfg.spatial_neighbors,
+        spatial_max_distance_m=cfg.spatial_max_distance_m,
+        sequential_overlap=cfg.sequential_overlap,
+        loop_closure_pairs=cfg.loop_closure_pairs,
+    )
+    all_pairs = sorted(set().union(*pairs.values()))
+    mt = match_pairs(db_path, all_pairs, cfg, work)
+    timings["match"] = mt["seconds"]
+    log.info("pairs: %d selected, %d newly matched", len(all_pairs), mt["new"])
+
+    names = [p.name for p in photos]
+    mres = map_photos(db_path, root, names, work / "mapping", cfg, previous)
+    timings["map"] = mres.seconds
+    rec = mres.reconstruction
+    n_reg = rec.num_reg_images()
+    if n_reg < cfg.min_registered_share * len(photos) or n_reg < 3:
+        listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
+        raise SfmError(
+            f"only {n_reg} of {len(photos)} photos registered (sfm.min_registered_share = "
+            f"{cfg.min_registered_share}). Dropped photos:\n  {listing}\n"
+            "Photos need overlap (neighbouring views sharing >= 1/3 of the scene) and "
+            "texture; add photos between the dropped ones or lower sfm.min_registered_share."
+        )
+    if mres.dropped:
+        log.warning(
+            "%d photo(s) not in the map: %s",
+            len(mres.dropped),
+            "; ".join(f"{n} ({why})" for n, why in mres.dropped.items()),
+        )
+
+    t = time.perf_counter()
+    kd = cfg.known_distance
+    alignment = robot_frame_transform(
+        rec,
+        photos,
+        camera_yaw_deg=cfg.camera_yaw_deg,
+        use_compass=cfg.use_compass,
+        min_odometry_pairs=cfg.min_odometry_pairs,
+        known_distance=(kd.image_a, kd.image_b, kd.distance_m) if kd else None,
+        previous=previous,
+    )
+    align_to_robot_frame(rec, alignment)
+    timings["align"] = time.perf_counter() - t
+
+    model_dir = Path(outputs.model_dir)
+    if model_dir.exists():
+        for f in model_dir.glob("*.bin"):
+            f.unlink()
+    write_model(rec, model_dir)
+    t = time.perf_counter()
+    write_point_descriptors(outputs.descriptors, collect_point_descriptors(rec, db_path))
+    timings["descriptors"] = time.perf_counter() - t
+
+    truths = {p.name: p.truth for p in photos if p.truth}
+    acc = (
+        evaluate_accuracy(rec, truths)
+        if truths
+        else {"evaluated": 0, "note": "no true poses in the capture logs (real robot or photos)"}
+    )
+    outputs.accuracy.write_text(json.dumps(acc, indent=1))
+    if cfg.plots:
+        from scenebot.sfm.plots import plot_accuracy_histograms, plot_map
+
+        plot_map(rec, outputs.map_png)
+        plot_accuracy_histograms(acc, outputs.accuracy_png)
+    timings["total"] = time.perf_counter() - t_start
+    report = {
+        "photos": len(photos),
+        "registered": n_reg,
+        "points3D": rec.num_points3D(),
+        "mean_reprojection_error_px": rec.compute_mean_reprojection_error(),
+        "mapping_mode": mres.mode,
+        "refinement": mres.refinement,
+        "models": mres.num_models,
+        "dropped": mres.dropped,
+        "features": {k: ext[k] for k in ("new", "reused", "no_features")},
+        "pairs": {k: len(v) for k, v in pairs.items()} | {"matched_now": mt["new"]},
+        "cameras": [
+            {"camera_id": c.camera_id, "model": c.model_name, "params": list(c.params)}
+            for c in rec.cameras.values()
+        ],
+        "focal_sources": sorted({p.focal_source for p in photos}),
+        "alignment": alignment.as_dict(),
+        "timings_s": timings,
+        "accuracy": {
+            k: acc[k]
+            for k in (
+                "metric_scale_error",
+                "position_error_m",
+                "heading_error_deg",
+                "frame_tilt_deg",
+            )
+            if k in acc
+        },
+    }
+    outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
+    shutil.rmtree(work, ignore_errors=True)
+    return report
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o).__name__)

@@ -1,0 +1,123 @@
+"""The dense stage end to end on a small synthetic capture, and its input errors."""
+
+import json
+import shutil
+
+import numpy as np
+import open3d as o3d
+import pycolmap
+import pytest
+
+from scenebot.dense import stage
+from scenebot.dense import workspace as ws
+from scenebot.dense.config import DenseConfig
+from scenebot.dense.evaluate import depth_map_metrics, mesh_raycaster
+from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
+
+W, H = 192, 144
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("dense_capture")
+    sc = box_room_scene()
+    centers, headings = stereo_rig(num_per_row=4, half_width_m=0.4)
+    rec, views = make_dataset(root, sc, centers, headings, W, H, num_points=3000)
+    return root, sc, rec, views
+
+
+def _cfg(**kw):
+    return DenseConfig(max_image_size=W, num_threads=2, taichi_arch="cpu", **kw)
+
+
+def test_end_to_end(capture, tmp_path):
+    root, sc, _rec, views = capture
+    out = stage.DenseOutputs(tmp_path / "dense")
+    summary = stage.run(_cfg(), stage.DenseInputs(root / "sparse", root / "images"), out)
+    assert summary["backend"] == "taichi"
+    assert summary["num_views"] == len(views)
+    assert json.loads(out.summary_json.read_text())["num_fused_points"] > 1000
+    for name in ("fused_views.png", "depth_normal_mosaic.png", "fused.ply"):
+        assert (out.dense_dir / name).stat().st_size > 1000
+    # depth maps in COLMAP format, good where they exist
+    accs = []
+    for v in views:
+        d, n = ws.read_maps(out.dense_dir, v.name, "geometric")
+        assert d.shape == (H, W) and n.shape == (H, W, 3)
+        m = depth_map_metrics(d, v.depth)
+        assert m["coverage"] > 0.4
+        accs.append(m["accuracy"])
+    assert np.mean(accs) > 0.9
+    # the fused cloud lies on the true surface
+    pts = np.asarray(o3d.io.read_point_cloud(str(out.fused_ply)).points)
+    dist = mesh_raycaster(sc.vertices, sc.triangles).compute_distance(
+        o3d.core.Tensor(pts.astype(np.float32))
+    )
+    dist = dist.numpy()
+    assert np.median(dist) < 0.01
+    assert np.mean(dist < 0.02) > 0.9
+
+
+def test_missing_photo(capture, tmp_path):
+    root, *_ = capture
+    images = tmp_path / "images"
+    shutil.copytree(root / "images", images)
+    (images / "view_003.jpg").unlink()
+    with pytest.raises(FileNotFoundError, match=r"1 registered photo\(s\) missing .*view_003.jpg"):
+        stage.run(_cfg(), stage.DenseInputs(root / "sparse", images), stage.DenseOutputs(tmp_path))
+
+
+def test_missing_model(capture, tmp_path):
+    root, *_ = capture
+    sparse = tmp_path / "sparse"
+    shutil.copytree(root / "sparse", sparse)
+    (sparse / "points3D.bin").unlink()
+    with pytest.raises(FileNotFoundError, match=r"points3D\.bin"):
+        stage.run(_cfg(), stage.DenseInputs(sparse, root / "images"), stage.DenseOutputs(tmp_path))
+
+
+def test_single_registered_view(capture, tmp_path):
+    root, _, rec, _ = capture
+    one = pycolmap.Reconstruction(rec)
+    for i in sorted(one.reg_image_ids())[1:]:
+        one.deregister_frame(one.image(i).frame_id)
+    (tmp_path / "sparse").mkdir()
+    one.write_binary(str(tmp_path / "sparse"))
+    with pytest.raises(ValueError, match="1 registered image"):
+        stage.run(
+            _cfg(),
+            stage.DenseInputs(tmp_path / "sparse", root / "images"),
+            stage.DenseOutputs(tmp_path),
+        )
+
+
+def test_view_without_overlap(tmp_path):
+    sc = box_room_scene()
+    centers = np.array([[0.0, -0.2, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.0]])
+    headings = np.array([0.0, 0.0, np.pi])  # the third looks backwards
+    make_dataset(tmp_path / "cap", sc, centers, headings, 128, 96, num_points=2000)
+    inputs = stage.DenseInputs(tmp_path / "cap" / "sparse", tmp_path / "cap" / "images")
+    with pytest.raises(ValueError, match=r"share no usable overlap.*view_002.jpg"):
+        stage.run(_cfg(), inputs, stage.DenseOutputs(tmp_path / "dense"))
+
+
+def test_colmap_cuda_backend_requires_cuda():
+    if pycolmap.has_cuda:
+        pytest.skip("this pycolmap has CUDA")
+    with pytest.raises(RuntimeError, match="has no CUDA"):
+        stage.choose_backend(DenseConfig(backend="colmap_cuda"))
+    assert stage.choose_backend(DenseConfig()) == "taichi"
+
+
+def test_without_geometric_pass(capture, tmp_path):
+    root, _, _, views = capture
+    cfg = _cfg(plots=False, patchmatch={"geom_iterations": 0})
+    out = stage.DenseOutputs(tmp_path / "dense")
+    stage.run(cfg, stage.DenseInputs(root / "sparse", root / "images"), out)
+    m = [
+        depth_map_metrics(ws.read_maps(out.dense_dir, v.name, "geometric")[0], v.depth)
+        for v in views
+    ]
+    assert np.mean([x["coverage"] for x in m]) > 0.4
+    assert np.mean([x["accuracy"] for x in m]) > 0.85
+    assert not (out.dense_dir / "stereo" / "unfiltered").exists()

@@ -1,0 +1,321 @@
+"""Path following against a small kinematic robot with slip (no renderer needed)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenebot.capturelog import CaptureLog, read_log
+from scenebot.follow import FollowConfig, PathFollower, compose_odometry, robot_pose_from_camera
+from scenebot.localize.localize import FailureReason, LocalizationFailure, PoseEstimate
+from scenebot.localize.synthetic import camera_rotation
+from scenebot.plan import PlanConfig, build_navgrid
+from scenebot.plan.path import GridPlanner
+from scenebot.robot.base import (
+    Camera,
+    Health,
+    MotionResult,
+    MotionStatus,
+    Pose2D,
+    Robot,
+    SensorReading,
+)
+
+CAM_FWD = 0.1
+
+
+class KinematicRobot(Robot):
+    """A disk robot: turns slip by ``turn_slip`` (odometry does not see it); boxes bump it."""
+
+    def __init__(self, pose, turn_slip=0.08, boxes=(), radius=0.15, odo_theta0=1.0):
+        self.true = np.array(pose, float)
+        self.turn_slip = turn_slip
+        self.boxes = [np.array(b, float) for b in boxes]  # (x0, y0, x1, y1)
+        self.radius = radius
+        self.t = 0.0
+        # odometry frame: unrelated origin and heading offset
+        self.odo = Pose2D(0.0, 0.0, odo_theta0)
+        self.min_clearance = math.inf
+
+    def _clearance(self, xy):
+        c = math.inf
+        for x0, y0, x1, y1 in self.boxes:
+            dx = max(x0 - xy[0], 0.0, xy[0] - x1)
+            dy = max(y0 - xy[1], 0.0, xy[1] - y1)
+            c = min(c, math.hypot(dx, dy))
+        return c
+
+    def drive(self, distance_m):
+        step = 0.005 * math.copysign(1.0, distance_m)
+        done = 0.0
+        status, bumper = MotionStatus.COMPLETED, None
+        while abs(done) < abs(distance_m) - 1e-12:
+            s = step if abs(distance_m - done) > abs(step) else distance_m - done
+            nxt = self.true[:2] + s * np.array([math.cos(self.true[2]), math.sin(self.true[2])])
+            if self._clearance(nxt) < self.radius:
+                status, bumper = MotionStatus.BUMPED, "front" if distance_m > 0 else "rear"
+                break
+            self.true[:2] = nxt
+            done += s
+        self.min_clearance = min(self.min_clearance, self._clearance(self.true[:2]))
+        o = self.odo
+        self.odo = Pose2D(o.x + done * math.cos(o.theta), o.y + done * math.sin(o.theta), o.theta)
+        self.t += abs(done) / 0.2 + 0.1
+        return MotionResult(status, done, 0.0, bumper, 0.1)
+
+    def turn(self, angle_rad):
+        self.true[2] += angle_rad * (1.0 - self.turn_slip)
+        self.odo = Pose2D(self.odo.x, self.odo.y, (self.odo.theta + angle_rad) % (2 * math.pi))
+        self.t += 0.5
+        return MotionResult(MotionStatus.COMPLETED, 0.0, angle_rad, None, 0.5)
+
+    def stop(self):
+        pass
+
+    def sense(self):
+        return SensorReading(self.t, 0.0, 255, False, False, self.odo)
+
+    def health(self):
+        return Health(8000, True)
+
+    @property
+    def now(self):
+        return self.t
+
+    def camera_pose(self):
+        x, y, th = self.true
+        c = np.array([x + CAM_FWD * math.cos(th), y + CAM_FWD * math.sin(th), 0.0])
+        return camera_rotation(th), c
+
+
+class NullCamera(Camera):
+    def __init__(self):
+        self.shots = 0
+
+    def capture(self, dest: Path, timeout_s: float = 30.0) -> Path:
+        self.shots += 1
+        return Path(dest)
+
+
+class OracleLocalizer:
+    """Test double for visual localization: the true camera pose plus noise, or failures."""
+
+    def __init__(self, robot, sigma_m=0.005, sigma_deg=0.3, fail=lambda k: False, seed=0):
+        self.robot = robot
+        self.rng = np.random.default_rng(seed)
+        self.sigma_m, self.sigma_deg, self.fail = sigma_m, sigma_deg, fail
+        self.calls = 0
+
+    def __call__(self, path):
+        k = self.calls
+        self.calls += 1
+        if self.fail(k):
+            return LocalizationFailure(FailureReason.TOO_FEW_MATCHES, 500, 3, 0)
+        _, c = self.robot.camera_pose()
+        th = self.robot.true[2] + math.radians(self.rng.normal(0, self.sigma_deg))
+        R = camera_rotation(th)
+        c = c + np.r_[self.rng.normal(0, self.sigma_m, 2), 0.0]
+        return PoseEstimate(R, -R @ c, 520.0, 800, 300, 250, 0.8, "oracle")
+
+
+def _open_grid():
+    pts = np.zeros((0, 3))
+    return build_navgrid(pts, np.array([[-1.0, -1.0], [5.0, 5.0]]), PlanConfig(margin_m=0.5))
+
+
+def test_pose_math_roundtrips():
+    fix = Pose2D(2.0, 1.0, 0.3)
+    odo0 = Pose2D(5.0, -2.0, 2.0)
+    # drive 1 m forward and turn 0.5 rad in odometry: the map pose moves the same way
+    odo1 = Pose2D(5.0 + math.cos(2.0), -2.0 + math.sin(2.0), 2.5)
+    p = compose_odometry(fix, odo0, odo1)
+    assert (p.x, p.y) == pytest.approx((2.0 + math.cos(0.3), 1.0 + math.sin(0.3)))
+    assert p.theta == pytest.approx(0.8)
+    R = camera_rotation(1.0)
+    c = np.array([1.0 + 0.1 * math.cos(1.0), 2.0 + 0.1 * math.sin(1.0), 0.0])
+    est = PoseEstimate(R, -R @ c, 500.0, 1, 1, 1, 0.0, "x")
+    q = robot_pose_from_camera(est, 0.1, 0.0)
+    assert (q.x, q.y, q.theta) == pytest.approx((1.0, 2.0, 1.0))
+
+
+def test_follows_a_path_with_turn_slip_and_reaches_the_goal(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.1)
+    loc = OracleLocalizer(robot)
+    cfg = FollowConfig(camera_forward_m=CAM_FWD)
+    with CaptureLog(tmp_path / "log.jsonl") as log:
+        f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid()), cfg, tmp_path, log)
+        path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.5, 3.0]])
+        res = f.follow(path, goal_theta=math.pi / 2)
+    assert res.reached and res.reason == "reached" and res.localized_at_goal
+    assert math.hypot(robot.true[0] - 0.5, robot.true[1] - 3.0) < 0.1
+    assert abs(math.remainder(robot.true[2] - math.pi / 2, 2 * math.pi)) < math.radians(5)
+    events = [r["event"] for r in read_log(tmp_path / "log.jsonl")]
+    assert events[0] == "follow_start" and events[-1] == "follow_end"
+    assert events.count("target_node") >= 2  # switched B -> C -> D
+    assert res.localizations >= 4
+
+
+def test_without_localization_odometry_drifts_but_following_never_crashes(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.1)
+    loc = OracleLocalizer(robot, fail=lambda k: True)  # every photo fails
+    f = PathFollower(
+        robot,
+        NullCamera(),
+        loc,
+        GridPlanner(_open_grid()),
+        FollowConfig(camera_forward_m=CAM_FWD),
+        tmp_path,
+        initial_pose=Pose2D(0.0, 0.0, 0.0),
+    )
+    res = f.follow(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]))
+    assert res.reached and not res.localized_at_goal
+    assert res.failed_localizations > 3 and res.localizations == 0
+    # the slipped turn left the robot off the goal: it really ran on odometry
+    assert math.hypot(robot.true[0] - 2.0, robot.true[1] - 2.0) > 0.1
+
+
+def test_intermittent_localization_failures_are_retried_after_moving(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.1)
+    loc = OracleLocalizer(robot, fail=lambda k: k % 2 == 1)
+    f = PathFollower(
+        robot,
+        NullCamera(),
+        loc,
+        GridPlanner(_open_grid()),
+        FollowConfig(camera_forward_m=CAM_FWD),
+        tmp_path,
+    )
+    res = f.follow(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.5, 3.0]]))
+    assert res.reached and res.failed_localizations >= 1 and res.localizations >= 2
+    assert math.hypot(robot.true[0] - 0.5, robot.true[1] - 3.0) < 0.1
+
+
+def test_obstacle_missing_from_map_is_bumped_marked_and_avoided(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0), boxes=[(1.2, -0.4, 1.5, 0.4)])
+    loc = OracleLocalizer(robot)
+    planner = GridPlanner(_open_grid())
+    f = PathFollower(
+        robot, NullCamera(), loc, planner, FollowConfig(camera_forward_m=CAM_FWD), tmp_path
+    )
+    res = f.go_to(np.array([3.0, 0.0]))
+    assert res.reached, res.reason
+    assert 1 <= res.obstacles < 5 and res.replans == res.obstacles
+    assert math.hypot(robot.true[0] - 3.0, robot.true[1]) < 0.1
+    assert robot.min_clearance >= robot.radius - 1e-9  # never drove through the box
+
+
+def test_unreachable_goal_is_abandoned_after_k_obstacles_with_reason(tmp_path):
+    # the goal sits inside a closed pen the map does not know about
+    pen = [
+        (2.4, -0.6, 3.6, -0.5),
+        (2.4, 0.5, 3.6, 0.6),
+        (2.4, -0.6, 2.5, 0.6),
+        (3.5, -0.6, 3.6, 0.6),
+    ]
+    robot = KinematicRobot((0.0, 0.0, 0.0), boxes=pen)
+    loc = OracleLocalizer(robot)
+    with CaptureLog(tmp_path / "log.jsonl") as log:
+        f = PathFollower(
+            robot,
+            NullCamera(),
+            loc,
+            GridPlanner(_open_grid()),
+            FollowConfig(camera_forward_m=CAM_FWD, max_obstacles=5),
+            tmp_path,
+            log,
+        )
+        res = f.go_to(np.array([3.0, 0.0]))
+    assert not res.reached
+    assert res.obstacles == 5 or "replanning failed" in res.reason
+    assert "obstacle" in res.reason
+    end = [r for r in read_log(tmp_path / "log.jsonl") if r.get("event") == "follow_end"][-1]
+    assert end["reached"] is False and end["reason"] == res.reason
+    json.dumps(end)  # the log record is plain JSON
+    assert robot.min_clearance >= robot.radius - 1e-9
+
+
+def test_goal_in_obstacle_or_outside_grid_is_skipped_with_reason(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0))
+    f = PathFollower(
+        robot,
+        NullCamera(),
+        OracleLocalizer(robot),
+        GridPlanner(_open_grid()),
+        FollowConfig(camera_forward_m=CAM_FWD),
+        tmp_path,
+    )
+    res = f.go_to(np.array([50.0, 0.0]))
+    assert not res.reached and res.reason.startswith("skipped") and "outside" in res.reason
+    assert res.motions == 0
+
+
+def test_go_to_view_puts_the_camera_centre_on_the_goal(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.05)
+    f = PathFollower(
+        robot,
+        NullCamera(),
+        OracleLocalizer(robot),
+        GridPlanner(_open_grid()),
+        FollowConfig(camera_forward_m=CAM_FWD),
+        tmp_path,
+    )
+    res = f.go_to_view(np.array([2.0, 1.0]), heading=math.pi)
+    assert res.reached
+    _, c = robot.camera_pose()
+    assert math.hypot(c[0] - 2.0, c[1] - 1.0) < 0.1
+    assert abs(math.remainder(robot.true[2] - math.pi, 2 * math.pi)) < math.radians(3)
+
+
+class AliasingLocalizer(OracleLocalizer):
+    """Returns a confident pose shifted by ``shift`` (a repeated texture) on chosen calls."""
+
+    def __init__(self, robot, wrong, shift=(2.0, 0.0)):
+        super().__init__(robot)
+        self.wrong, self.shift = wrong, np.array([*shift, 0.0])
+
+    def __call__(self, path):
+        k = self.calls
+        est = super().__call__(path)
+        if self.wrong(k):
+            c = est.center + self.shift
+            return PoseEstimate(est.R, -est.R @ c, 520.0, 800, 300, 250, 0.8, "oracle")
+        return est
+
+
+def test_a_confident_wrong_fix_is_rejected_by_the_odometry_gate(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.05)
+    loc = AliasingLocalizer(robot, wrong=lambda k: k == 2)
+    with CaptureLog(tmp_path / "log.jsonl") as log:
+        f = PathFollower(
+            robot,
+            NullCamera(),
+            loc,
+            GridPlanner(_open_grid()),
+            FollowConfig(camera_forward_m=CAM_FWD),
+            tmp_path,
+            log,
+        )
+        res = f.follow(np.array([[0.0, 0.0], [1.5, 0.0], [1.5, 1.5]]))
+    assert res.reached and math.hypot(robot.true[0] - 1.5, robot.true[1] - 1.5) < 0.1
+    rejected = [r for r in read_log(tmp_path / "log.jsonl") if r["event"] == "localize_rejected"]
+    assert len(rejected) == 1 and rejected[0]["reason"] == "inconsistent_with_odometry"
+
+
+def test_two_agreeing_fixes_override_a_wrong_initial_pose(tmp_path):
+    robot = KinematicRobot((0.0, 0.0, 0.0))
+    f = PathFollower(
+        robot,
+        NullCamera(),
+        OracleLocalizer(robot),
+        GridPlanner(_open_grid()),
+        FollowConfig(camera_forward_m=CAM_FWD),
+        tmp_path,
+        initial_pose=Pose2D(1.5, 1.0, 0.0),  # 1.8 m off: the first fix is rejected
+    )
+    res = f.follow(np.array([[1.5, 1.0], [2.0, 0.5]]))
+    assert res.reached and math.hypot(robot.true[0] - 2.0, robot.true[1] - 0.5) < 0.1
+    assert res.failed_localizations >= 1

@@ -1,0 +1,154 @@
+"""Goals: non-maximum suppression, completeness, and the score + goals stages end to end."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+
+from scenebot.score import synthetic as syn
+from scenebot.score.candidates import read_candidates
+from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
+from scenebot.score.freespace import FreeSpace, cut_segments, point_segment_distance
+from scenebot.score.goals import goals_document, heading_difference, select_goals
+from scenebot.score.mesh import read_mesh
+from scenebot.score.stage import (
+    GoalsInputs,
+    GoalsOutputs,
+    MeshInputs,
+    MeshOutputs,
+    ScoreInputs,
+    ScoreOutputs,
+    run_goals,
+    run_mesh,
+    run_score,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(1, 60),
+    k=st.integers(1, 12),
+    radius=st.floats(0.0, 2.0),
+    angle=st.floats(0.0, 180.0),
+    seed=st.integers(0, 10_000),
+)
+def test_nms_property(n, k, radius, angle, seed):
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack([rng.uniform(0, 3, n), rng.uniform(0, 3, n), rng.uniform(-4, 4, n)])
+    score = rng.uniform(0, 180, n)
+    score[rng.random(n) < 0.1] = np.nan
+    chosen = select_goals(poses, score, k, radius, angle)
+    assert len(chosen) <= k and len(set(chosen.tolist())) == len(chosen)
+    assert np.all(np.isfinite(score[chosen]))
+    assert np.all(np.diff(score[chosen]) <= 0)  # best first
+    thr = np.deg2rad(angle)
+    for a in range(len(chosen)):
+        for b in range(a):
+            p, q = poses[chosen[a]], poses[chosen[b]]
+            far = np.hypot(*(p[:2] - q[:2])) >= radius
+            turned = heading_difference(p[2], q[2]) > thr
+            assert far or turned
+    # greedy: any candidate left out scores below the last goal, or is suppressed by a goal
+    if len(chosen) < k:
+        for c in np.nonzero(np.isfinite(score))[0]:
+            if c in chosen:
+                continue
+            g = poses[chosen]
+            near = np.hypot(g[:, 0] - poses[c, 0], g[:, 1] - poses[c, 1]) < radius
+            same = heading_difference(g[:, 2], poses[c, 2]) <= thr
+            assert (near & same & (score[chosen] >= score[c])).any()
+
+
+def test_heading_difference_wraps():
+    assert np.isclose(heading_difference(np.pi - 0.1, -np.pi + 0.1), 0.2)
+    assert np.isclose(heading_difference(0.0, 2 * np.pi), 0.0)
+    assert np.isclose(heading_difference(0.0, np.pi), np.pi)
+
+
+def test_complete_flag():
+    poses = np.zeros((3, 3))
+    score = np.array([3.0, 8.0, np.nan])
+    assert goals_document(poses, score, np.array([1]), 10.0, "round_005")["complete"]
+    doc = goals_document(poses, score, np.array([1]), 5.0, "round_005")
+    assert not doc["complete"] and doc["best_score_deg"] == 8.0
+    assert not goals_document(poses, np.full(3, np.nan), np.array([], int), 10.0, "r")["complete"]
+
+
+@pytest.fixture(scope="module")
+def scored_room(tmp_path_factory):
+    root = tmp_path_factory.mktemp("goals") / "office" / "round_001"
+    V, F = syn.room(cell_m=0.5)
+    # every photo looks west: the east walls are never photographed
+    from scenebot.score.geometry import planar_cam_from_world
+
+    th = np.deg2rad(np.arange(125, 236, 10))
+    p = np.array([(x, y, a) for x in (-1.5, 0.0, 1.5) for y in (-1.0, 0.8) for a in th])
+    Rt = planar_cam_from_world(p[:, 0], p[:, 1], p[:, 2])
+    R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]
+    K = syn.default_intrinsics()
+    rng = np.random.default_rng(2)
+    pts, _ = syn.sample_surface(V, F, 12000, rng)
+    syn.write_colmap_model(root / "sfm", K, R, t, pts, syn.visible_mask(V, F, R, t, K, pts), rng)
+    mo = MeshOutputs(root / "mesh.ply", root / "freespace.json", root / "freespace.npz")
+    run_mesh(MeshConfig(), MeshInputs(root / "sfm"), mo)
+    so = ScoreOutputs(root / "candidates.csv", root / "score_views.png")
+    summary = run_score(
+        ScoreConfig(n_candidates=300, width=40, height=30, plot_top=2, backend="cpu"),
+        ScoreInputs(root / "sfm", mo.mesh_ply, mo.freespace_npz),
+        so,
+    )
+    go = GoalsOutputs(root / "goals.json", root / "goals.png")
+    doc = run_goals(GoalsConfig(k=6), GoalsInputs(so.candidates_csv, mo.freespace_npz), go)
+    return {"root": root, "mo": mo, "so": so, "go": go, "doc": doc, "summary": summary}
+
+
+def test_goals_in_free_space_clear_of_the_mesh(scored_room):
+    doc = json.loads(scored_room["go"].goals_json.read_text())
+    assert doc == scored_room["doc"]
+    assert doc["round"] == "round_001" and not doc["complete"]
+    assert 1 <= len(doc["goals"]) <= 6
+    g = np.array([[x["x"], x["y"], x["theta"]] for x in doc["goals"]])
+    fs = FreeSpace.load(scored_room["mo"].freespace_npz)
+    assert fs.contains(g[:, :2]).all()
+    Vm, Fm = read_mesh(scored_room["mo"].mesh_ply)
+    d = point_segment_distance(g[:, :2], cut_segments(Vm, Fm, 0.0))
+    assert d.min() >= MeshConfig().robot_radius_m - 1e-3  # goals.json rounds to 0.1 mm
+    cfg = GoalsConfig()
+    for a in range(len(g)):
+        for b in range(a):
+            far = np.hypot(*(g[a, :2] - g[b, :2])) >= cfg.nms_radius_m
+            assert far or heading_difference(g[a, 2], g[b, 2]) > np.deg2rad(cfg.nms_angle_deg)
+    # goals are the worst-predicted views: they face the unphotographed east
+    assert np.all(np.cos(g[:, 2]) > 0)
+    assert scored_room["go"].goals_png.stat().st_size > 1000
+
+
+def test_candidates_file(scored_room):
+    cols = read_candidates(scored_room["so"].candidates_csv)
+    assert len(cols["x"]) == 300
+    s = cols["score_deg"]
+    assert np.all((s[np.isfinite(s)] >= 0) & (s[np.isfinite(s)] <= 180))
+    assert np.all((cols["hit_fraction"] >= 0) & (cols["hit_fraction"] <= 1))
+    # facing east (unphotographed) scores worse than facing west
+    east = np.cos(cols["theta"]) > 0.5
+    west = np.cos(cols["theta"]) < -0.5
+    assert np.nanmean(s[east]) > np.nanmean(s[west]) + 60
+    assert scored_room["so"].views_png.stat().st_size > 1000
+    assert scored_room["summary"]["candidates"] == 300
+
+
+def test_zero_candidates_file_is_named(scored_room, tmp_path):
+    p = tmp_path / "round_007" / "candidates.csv"
+    p.parent.mkdir()
+    p.write_text("x,y,theta,score_deg,hit_fraction,seen_fraction\n")
+    with pytest.raises(ValueError, match=r"round_007.*n_candidates"):
+        run_goals(
+            GoalsConfig(),
+            GoalsInputs(p, scored_room["mo"].freespace_npz),
+            GoalsOutputs(tmp_path / "round_007" / "goals.json"),
+        )

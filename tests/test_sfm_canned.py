@@ -1,0 +1,41 @@
+"""The sfm stage on the committed canned photo set (45 photos of the simulated office, 320x240).
+
+Made by ``tests/data/make_canned.py`` through the capture stage; the log's ``truth`` is used
+only by the evaluation. Tolerances are for 320x240 photos.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+
+from scenebot.sfm.config import SfmConfig
+from scenebot.sfm.stage import SfmInputs, SfmOutputs, run
+
+CANNED = Path(__file__).parent / "data" / "canned" / "round_000" / "capture"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned set not generated")
+def test_canned_office_round0(tmp_path):
+    cap = tmp_path / "scene" / "round_000" / "capture"
+    shutil.copytree(CANNED, cap)
+    out = SfmOutputs(tmp_path / "scene" / "round_000" / "sfm")
+    cfg = SfmConfig(peak_threshold=0.002)  # small photos: more SIFT features
+    report = run(cfg, SfmInputs(tmp_path / "scene" / "sfm_db" / "database.db", [cap]), out)
+    assert report["registered"] >= 0.9 * report["photos"]
+    assert report["alignment"]["scale_source"] == "odometry"
+    acc = json.loads(out.accuracy.read_text())
+    assert acc["metric_scale_error"] < 0.05
+    assert acc["position_error_m"]["median"] < 0.06
+    assert acc["heading_error_deg"]["median"] < 1.0
+    rec = pycolmap.Reconstruction(str(out.model_dir))
+    z = np.array([rec.image(i).projection_center()[2] for i in rec.reg_image_ids()])
+    assert np.median(np.abs(z)) < 0.08  # 320x240: the model bends by centimetres
+    d = np.load(out.descriptors)
+    assert len(d["point_ids"]) == sum(p.track.length() for p in rec.points3D.values())

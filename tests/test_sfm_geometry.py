@@ -1,0 +1,217 @@
+"""Robot-frame alignment, Umeyama and pair selection on synthetic ground truth (no images)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pycolmap
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from scenebot.sfm.align import fit_plane_normal, fit_robot_frame
+from scenebot.sfm.evaluate import evaluate_accuracy, umeyama
+from scenebot.sfm.pairs import PairPrior, select_pairs
+from scenebot.sfm.photos import Photo
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return pycolmap.Rotation3d(q).matrix()
+
+
+def _robot_trajectory(rng, n_spots=4, per_circle=12, offset=(0.1, 0.02), compass_off=0.7):
+    """Robot-frame cameras of circles of photos; noisy odometry; compass with an offset.
+
+    Returns photos, and the true camera centres C (N, 3), up U, viewing V in the robot frame.
+    """
+    photos, C, U, V = [], [], [], []
+    pos = np.zeros(2)
+    theta = 0.3
+    odo = np.array([0.0, 0.0, theta])
+    idx = 0
+    for _ in range(n_spots):
+        for _ in range(per_circle):
+            fwd = np.array([math.cos(theta), math.sin(theta)])
+            left = np.array([-fwd[1], fwd[0]])
+            c = pos + offset[0] * fwd + offset[1] * left
+            C.append([c[0], c[1], 0.0])
+            U.append([0.0, 0.0, 1.0])
+            V.append([fwd[0], fwd[1], 0.0])
+            photos.append(
+                Photo(
+                    name=f"p{idx:03d}.jpg",
+                    path=None,
+                    round=0,
+                    index=idx,
+                    odometry=(float(odo[0]), float(odo[1]), float(odo[2])),
+                    compass_deg=math.degrees(theta) % 360 + rng.normal(0, 1.0),
+                )
+            )
+            idx += 1
+            step = 2 * math.pi / per_circle
+            theta += step
+            odo[2] += step * (1 - 0.05)  # slip: odometry heading drifts
+        d = rng.uniform(0.8, 1.5)
+        theta += rng.uniform(-1, 1)
+        odo[2] += rng.uniform(-1, 1) * 0.9
+        pos = pos + d * np.array([math.cos(theta), math.sin(theta)])
+        odo[:2] += d * (1 + rng.normal(0, 0.01)) * np.array([math.cos(odo[2]), math.sin(odo[2])])
+    return photos, np.array(C), np.array(U), np.array(V)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fit_robot_frame_recovers_scale_heading_and_plane(seed):
+    rng = np.random.default_rng(seed)
+    photos, C, U, V = _robot_trajectory(rng)
+    # an arbitrary SfM frame: x_sfm = (R0^T (x - t0)) / s0
+    s0, R0, t0 = rng.uniform(0.2, 5.0), _random_rotation(rng), rng.normal(size=3)
+    Cs = (C - t0) @ R0 / s0
+    Cs += rng.normal(0, 0.002 / s0, Cs.shape)  # 2 mm SfM noise
+    al = fit_robot_frame(photos, Cs, U @ R0, V @ R0)
+    assert al.scale_source == "odometry" and al.heading_source == "compass"
+    assert al.scale == pytest.approx(s0, rel=0.02)
+    Cr = al.scale * Cs @ al.R.T + al.t
+    assert np.abs(Cr[:, 2]).max() < 0.01  # camera centres on z = 0
+    up = (U @ R0) @ al.R.T
+    assert np.all(up[:, 2] > 0.999)  # z up
+    vr = (V @ R0) @ al.R.T
+    yaw_err = np.degrees(
+        np.abs(
+            (np.arctan2(vr[:, 1], vr[:, 0]) - np.arctan2(V[:, 1], V[:, 0]) + np.pi) % (2 * np.pi)
+            - np.pi
+        )
+    )
+    assert np.median(yaw_err) < 0.5  # compass noise 1 deg averaged over 48 photos
+    assert np.allclose(al.camera_offset_m, (0.1, 0.02), atol=0.01)
+    # origin: the robot's first position (odometry 0, 0) up to the compass-fit yaw error
+    assert np.linalg.norm(Cr[0, :2] - C[0, :2]) < 0.02
+
+
+def test_plane_normal_sign_follows_camera_up():
+    rng = np.random.default_rng(3)
+    centers = np.c_[rng.uniform(-2, 2, (30, 2)), rng.normal(0, 0.001, 30)]
+    ups = np.tile([0.0, 0.0, -1.0], (30, 1))  # a model where "up" is -z
+    n, stats = fit_plane_normal(centers, ups)
+    assert n @ np.array([0, 0, -1.0]) > 0.999 and not stats["plane_degenerate"]
+    line = np.c_[np.linspace(0, 3, 20), np.zeros(20), np.zeros(20)]  # collinear centres
+    ups2 = np.tile([0.0, 0.6, 0.8], (20, 1))
+    n2, stats2 = fit_plane_normal(line, ups2)
+    assert stats2["plane_degenerate"] and n2 @ np.array([0.0, 0.6, 0.8]) > 0.999
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.01, 100.0))
+def test_umeyama_recovers_similarity(seed, scale):
+    rng = np.random.default_rng(seed)
+    src = rng.normal(size=(20, 3))
+    R = _random_rotation(rng)
+    t = rng.normal(size=3) * 10
+    s, R_est, t_est = umeyama(src, scale * src @ R.T + t)
+    assert s == pytest.approx(scale, rel=1e-6)
+    assert np.allclose(R_est, R, atol=1e-6)
+    assert np.allclose(t_est, t, atol=1e-6 * max(1.0, scale) * 10)
+
+
+def test_evaluate_accuracy_on_synthetic_model():
+    opts = pycolmap.SyntheticDatasetOptions(num_rigs=1, num_frames_per_rig=12, num_points3D=50)
+    opts.num_cameras_per_rig = 1
+    rec = pycolmap.synthesize_dataset(opts)
+    # truth: the model's own poses in a world scaled by 2 (scale error 50 %) and rotated
+    rng = np.random.default_rng(4)
+    Rw, tw = _random_rotation(rng), rng.normal(size=3)
+    truths = {}
+    for iid in rec.reg_image_ids():
+        im = rec.image(iid)
+        R = im.cam_from_world().rotation.matrix()
+        c = im.projection_center()
+        truths[im.name] = {
+            "center": (2.0 * Rw @ c + tw).tolist(),
+            "R_cam_from_world": (R @ Rw.T).reshape(-1).tolist(),
+        }
+    acc = evaluate_accuracy(rec, truths)
+    assert acc["evaluated"] == 12
+    assert acc["position_error_m"]["max"] < 1e-6
+    assert acc["heading_error_deg"]["max"] < 1e-4
+    assert acc["metric_scale_error"] == pytest.approx(0.5, abs=1e-6)
+    # a perturbed photo shows up with the right error split
+    name = next(iter(truths))
+    tr = truths[name]
+    v = np.asarray(tr["R_cam_from_world"]).reshape(3, 3)[2]
+    tr["center"] = (np.asarray(tr["center"]) + 0.05 * v).tolist()  # 5 cm along line of sight
+    acc = evaluate_accuracy(rec, truths)
+    row = next(p for p in acc["per_photo"] if p["name"] == name)
+    assert row["line_of_sight_m"] > 3 * row["transverse_m"]
+    assert 0.03 < row["position_error_m"] < 0.06
+
+
+def _circle_priors(n_spots=5, per_circle=36, rounds=1):
+    pri = []
+    for r in range(rounds):
+        k = 0
+        for s in range(n_spots):
+            for i in range(per_circle):
+                pri.append(
+                    PairPrior(
+                        f"r{r}_{k:04d}",
+                        r,
+                        k,
+                        f"odometry_{r}",
+                        (1.2 * s + 0.3 * r, 0.0),
+                        2 * math.pi * i / per_circle,
+                    )
+                )
+                k += 1
+    return pri
+
+
+def test_select_pairs_exhaustive_small_and_linear_large():
+    pri = _circle_priors(1, 10)
+    p = select_pairs(
+        pri,
+        exhaustive_max_images=10,
+        spatial_neighbors=5,
+        spatial_max_distance_m=3,
+        sequential_overlap=3,
+        loop_closure_pairs=2,
+    )
+    assert len(p["exhaustive"]) == 45
+    for n_spots in (4, 8):
+        pri = _circle_priors(n_spots, 36)
+        p = select_pairs(
+            pri,
+            exhaustive_max_images=40,
+            spatial_neighbors=10,
+            spatial_max_distance_m=3,
+            sequential_overlap=3,
+            loop_closure_pairs=2,
+        )
+        allp = set().union(*p.values())
+        n = len(pri)
+        assert len(allp) <= n * (10 + 3 + 2)  # linear in the photo count
+        assert all(a < b for a, b in allp)
+        # spatial pairs link each circle to the next spot (same heading, 1.2 m away)
+        spot = {q.name: int(q.name[3:]) // 36 for q in pri}
+        cross = {(spot[a], spot[b]) for a, b in p["spatial"] if spot[a] != spot[b]}
+        assert all((s, s + 1) in cross for s in range(n_spots - 1))
+
+
+def test_select_pairs_bridges_a_round_without_shared_frame():
+    pri = _circle_priors(3, 12, rounds=2)
+    p = select_pairs(
+        pri,
+        exhaustive_max_images=10,
+        spatial_neighbors=6,
+        spatial_max_distance_m=3,
+        sequential_overlap=2,
+        loop_closure_pairs=0,
+    )
+    assert p["bridge"]
+    for a, b in p["bridge"]:
+        assert a[:2] != b[:2]  # across rounds
+        ha = next(q.heading for q in pri if q.name == a)
+        hb = next(q.heading for q in pri if q.name == b)
+        assert abs((ha - hb + math.pi) % (2 * math.pi) - math.pi) <= math.radians(30) + 1e-9
+    assert all(a[:2] == b[:2] for a, b in p["spatial"])  # odometry frames are per round

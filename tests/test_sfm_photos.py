@@ -1,0 +1,98 @@
+"""Photo checks of the sfm stage: EXIF focal, bad JPEGs, too few photos; photos never modified."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+
+import numpy as np
+import pytest
+
+from scenebot.sfm.photos import (
+    Photo,
+    PhotoError,
+    check_photos,
+    inspect_photo,
+    photos_from_folder,
+)
+from scenebot.sfm.synthetic import write_jpeg_with_exif
+
+
+def _img(seed=0, w=160, h=120):
+    return np.random.default_rng(seed).integers(0, 255, (h, w, 3), dtype=np.uint8)
+
+
+def _digest(folder):
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
+
+
+@pytest.mark.parametrize("focal", [100.0, 212.5, 480.0])
+def test_exif_focal_is_recovered(tmp_path, focal):
+    path = tmp_path / "a.jpg"
+    write_jpeg_with_exif(path, _img(), focal)
+    p = Photo(name="a.jpg", path=path)
+    inspect_photo(p)
+    assert (p.width, p.height) == (160, 120)
+    assert p.focal_source == "exif_focal_plane"
+    assert p.focal_px == pytest.approx(focal, rel=1e-4)
+
+
+def test_missing_exif_focal_falls_back_with_a_log_message(tmp_path, caplog):
+    for i in range(3):
+        write_jpeg_with_exif(tmp_path / f"p{i}.jpg", _img(i), None if i == 1 else 150.0)
+    _, photos = photos_from_folder(tmp_path)
+    with caplog.at_level(logging.WARNING):
+        check_photos(photos, fallback_focal_factor=1.2)
+    assert photos[1].focal_source == "fallback"
+    assert photos[1].focal_px == pytest.approx(1.2 * 160)
+    assert photos[0].focal_px == pytest.approx(150.0, rel=1e-4)
+    assert "p1.jpg" in caplog.text and "fallback_focal_factor" in caplog.text
+
+
+def test_corrupt_and_truncated_jpegs_are_named_and_left_alone(tmp_path):
+    for i in range(4):
+        write_jpeg_with_exif(tmp_path / f"p{i}.jpg", _img(i), 150.0)
+    data = (tmp_path / "p1.jpg").read_bytes()
+    (tmp_path / "p1.jpg").write_bytes(data[: len(data) // 2])  # truncated
+    (tmp_path / "p3.jpg").write_bytes(b"\xff\xd8\xff\xe0 definitely not a jpeg" * 10)
+    before = _digest(tmp_path)
+    _, photos = photos_from_folder(tmp_path)
+    with pytest.raises(PhotoError) as exc:
+        check_photos(photos, 1.2)
+    msg = str(exc.value)
+    assert "p1.jpg" in msg and "p3.jpg" in msg
+    assert "p0.jpg" not in msg and "p2.jpg" not in msg
+    assert "2 unusable photo(s)" in msg
+    assert _digest(tmp_path) == before
+
+
+def test_fewer_than_three_photos(tmp_path):
+    for i in range(2):
+        write_jpeg_with_exif(tmp_path / f"p{i}.jpg", _img(i), 150.0)
+    _, photos = photos_from_folder(tmp_path)
+    with pytest.raises(PhotoError, match=r"at least 3 photos, got 2 .*p0\.jpg.*p1\.jpg"):
+        check_photos(photos, 1.2)
+    with pytest.raises(PhotoError, match="does not exist"):
+        photos_from_folder(tmp_path / "nope")
+
+
+def test_changed_photo_resets_the_database(tmp_path):
+    from scenebot.sfm.config import SfmConfig
+    from scenebot.sfm.features import check_database_photos, extract, open_database
+
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for i in range(3):
+        write_jpeg_with_exif(folder / f"p{i}.jpg", _img(i), 150.0)
+    root, photos = photos_from_folder(folder)
+    check_photos(photos, 1.2)
+    db = tmp_path / "db" / "database.db"
+    assert extract(db, root, photos, SfmConfig())["new"] == 3
+    assert not check_database_photos(db, photos)
+    assert extract(db, root, photos, SfmConfig())["new"] == 0  # reused
+    write_jpeg_with_exif(folder / "p1.jpg", _img(7), 150.0)  # a re-captured photo
+    assert check_database_photos(db, photos)
+    assert (tmp_path / "db" / "database.db.stale").exists()
+    assert extract(db, root, photos, SfmConfig())["new"] == 3
+    with open_database(db) as d:
+        assert d.num_images() == 3
