@@ -12,6 +12,8 @@ configfile: "config.yaml"
 
 include: "rules/common.smk"
 include: "rules/capture.smk"
+include: "rules/map.smk"
+include: "rules/final.smk"
 
 
 rule all:

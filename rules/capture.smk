@@ -19,7 +19,7 @@ rule capture_round0:
         robot=1,
     params:
         py=PY,
-        cfg=stage_params("world", "sim", "exploration"),
+        cfg=stage_params("world", "sim", "exploration", "nxt", "nxt_emulator"),
         out=lambda w, output: Path(output.log).parent,
     shell:
         "{params.py:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "

@@ -25,14 +25,23 @@ STAGE_CODE = {
         "__init__.py",
         "capture.py",
         "capturelog.py",
-        "cli.py",
-        "config.py",
         "explore.py",
         "jpeg.py",
         "robot",
         "scene",
         "sim",
     ],
+    "sfm": ["sfm", "capturelog.py", "jpeg.py"],
+    "mesh": [
+        "score/mesh.py",
+        "score/freespace.py",
+        "score/geometry.py",
+        "score/stage.py",
+    ],
+    "score": ["score"],
+    "goals": ["score/goals.py", "score/plots.py", "score/stage.py"],
+    "plan": ["plan", "score/geometry.py"],
+    "dense": ["dense"],
 }
 
 
@@ -50,8 +59,37 @@ def stage_params(*sections):
     return section_json(CFG, "scene", "robot", "seed", *sections)
 
 
+PHOTOS = CFG.robot == "photos"  # bring-your-own photos: round 0 is a folder, no robot
+
+
 def campaign_targets():
-    return [
-        f"{RESULTS}/round_000/capture/log.jsonl",
-        f"{RESULTS}/round_000/capture/trajectory.png",
+    """What `snakemake` builds by default: the campaign as far as its stages exist."""
+    r0 = f"{RESULTS}/round_000"
+    captured = [] if PHOTOS else [f"{r0}/capture/log.jsonl", f"{r0}/capture/trajectory.png"]
+    return captured + [
+        f"{r0}/sfm/map.png",
+        f"{r0}/goals.json",
+        f"{r0}/goals.png",
+        f"{r0}/paths.json",
+        f"{r0}/navgrid.png",
+        f"{RESULTS}/final/dense/fused.ply",
     ]
+
+
+def captures_until(wildcards):
+    """The capture logs of rounds 0..r (the map of round r uses all of them)."""
+    r = int(wildcards.r)
+    if PHOTOS and r == 0:
+        folder = Path(CFG.photos.folder)
+        return sorted(str(p) for p in folder.glob("*") if p.suffix.lower() in (".jpg", ".jpeg"))
+    return [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(r + 1)]
+
+
+def image_root(input):
+    """The folder the map's image names are relative to (the scene folder, or the photos)."""
+    return CFG.photos.folder if PHOTOS else Path(input.model[0]).parents[2]
+
+
+def last_round():
+    """The round whose map the dense model and the tour use."""
+    return "000"

@@ -84,6 +84,28 @@ def make_sim_backend(cfg: Config):
     return SimRobot(world), SimCamera(world), world
 
 
+def make_backend(cfg: Config, capture_dir: Path):
+    """(robot, camera, world or None) of the configured ``robot`` backend.
+
+    ``sim``: the simulator. ``nxt``: a LEGO NXT on ``nxt.port`` with photos arriving in
+    ``nxt.camera.inbox``. ``nxt-emulated``: the same driver talking, through a
+    pseudo-terminal, to the brick emulator backed by the simulator; its Wi-Fi card writes to
+    ``<capture>/inbox`` so photos move into ``images/`` by rename.
+    """
+    if cfg.robot == "sim":
+        return make_sim_backend(cfg)
+    from scenebot.robot.nxt.backend import make_nxt_backend
+
+    emulated = cfg.robot == "nxt-emulated"
+    return make_nxt_backend(
+        cfg,
+        cfg.nxt,
+        emulated=emulated,
+        emulator=cfg.nxt_emulator,
+        inbox=Path(capture_dir) / "inbox" if emulated else None,
+    )
+
+
 def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: bool = True):
     """Round-0 capture: random exploration with the configured robot backend.
 
@@ -102,7 +124,7 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
     capture_dir.mkdir(parents=True, exist_ok=True)
     archive_previous(capture_dir)
     (capture_dir / "images").mkdir(exist_ok=True)
-    robot, camera, world = make_sim_backend(cfg)
+    robot, camera, world = make_backend(cfg, capture_dir)
     session = capture_dir / "session.jsonl"
     rng = np.random.default_rng([cfg.seed, round_index])
     cam = cfg.sim.camera
@@ -119,7 +141,8 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
                     "model": "PINHOLE",
                     "width": cam.width,
                     "height": cam.height,
-                    "focal_px": world.intrinsics.fx,
+                    # the simulator's exact focal; a real camera's EXIF is the authority
+                    "focal_px": world.intrinsics.fx if world is not None else None,
                 },
                 "config": cfg.model_dump(mode="json", include={"world", "sim", "exploration"}),
             }
@@ -139,7 +162,8 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
             bar.close()
             robot.stop()
         summary = asdict(result)
-        summary["max_penetration_m"] = world.max_penetration_m
+        if world is not None:
+            summary["max_penetration_m"] = world.max_penetration_m
         clog.write({"type": "end", "t": robot.now, "reason": "photo budget reached", **summary})
     for img in (capture_dir / "images").glob("*.jpg"):
         img.chmod(stat.S_IRUSR | stat.S_IRGRP | stat.S_IROTH)

@@ -33,6 +33,79 @@ def cmd_capture(args) -> int:
     return 0
 
 
+def cmd_sfm(args) -> int:
+    from scenebot.sfm.stage import inputs_for_round, run
+
+    cfg = _config(args)
+    folder = cfg.photos.folder if cfg.robot == "photos" and args.round == 0 else None
+    inputs, outputs = inputs_for_round(Path(args.scene_dir), args.round, photo_folder=folder)
+    print(json.dumps(run(cfg.sfm, inputs, outputs), default=str)[:2000])
+    return 0
+
+
+def cmd_mesh(args) -> int:
+    from scenebot.score.stage import MeshInputs, MeshOutputs, run_mesh
+
+    cfg, r = _config(args), Path(args.round_dir)
+    outs = MeshOutputs(
+        r / "mesh.ply", r / "freespace.json", r / "freespace.npz", r / "freespace.png"
+    )
+    print(json.dumps(run_mesh(cfg.mesh, MeshInputs(r / "sfm"), outs), default=str))
+    return 0
+
+
+def cmd_score(args) -> int:
+    from scenebot.score.stage import ScoreInputs, ScoreOutputs, run_score
+
+    cfg, r = _config(args), Path(args.round_dir)
+    inputs = ScoreInputs(r / "sfm", r / "mesh.ply", r / "freespace.npz")
+    outs = ScoreOutputs(r / "candidates.csv", r / "score_views.png")
+    print(json.dumps(run_score(cfg.score, inputs, outs), default=str))
+    return 0
+
+
+def cmd_goals(args) -> int:
+    from scenebot.score.stage import GoalsInputs, GoalsOutputs, run_goals
+
+    cfg, r = _config(args), Path(args.round_dir)
+    inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz")
+    print(json.dumps(run_goals(cfg.goals, inputs, GoalsOutputs(r / "goals.json", r / "goals.png"))))
+    return 0
+
+
+def cmd_plan(args) -> int:
+    from scenebot.plan.stage import PlanInputs, PlanOutputs, run
+
+    cfg, r = _config(args), Path(args.round_dir)
+    cam = cfg.sim.camera
+    doc = run(
+        cfg.plan,
+        PlanInputs(r / "sfm", r / "goals.json"),
+        PlanOutputs(r / "navgrid.npz", r / "paths.json", r / "navgrid.png"),
+        camera_offset_m=(cam.forward_offset_m, cam.lateral_offset_m),
+    )
+    print(json.dumps(doc, default=str)[:2000])
+    return 0
+
+
+def cmd_dense(args) -> int:
+    from scenebot.dense.stage import DenseInputs, DenseOutputs, run
+
+    cfg = _config(args)
+    inputs = DenseInputs(Path(args.sparse), Path(args.images))
+    print(json.dumps(run(cfg.dense, inputs, DenseOutputs(Path(args.out))), default=str))
+    return 0
+
+
+def cmd_nxt_emulator(args) -> int:
+    from scenebot.robot.nxt.backend import serve_emulator
+
+    cfg = _config(args)
+    inbox = Path(args.inbox) if args.inbox else None
+    serve_emulator(cfg, cfg.nxt, cfg.nxt_emulator, inbox=inbox)
+    return 0
+
+
 def cmd_schema(args) -> int:
     from scenebot.config import json_schema, write_schema
 
@@ -65,6 +138,38 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--round", type=int, default=0)
     c.add_argument("--no-progress", action="store_true")
     c.set_defaults(func=cmd_capture)
+
+    m = sub.add_parser("sfm", help="structure from motion of rounds 0..r (robot frame)")
+    with_config(m)
+    m.add_argument("--scene-dir", required=True, help="results/<scene>")
+    m.add_argument("--round", type=int, default=0)
+    m.set_defaults(func=cmd_sfm)
+
+    for name, func, text in (
+        ("mesh", cmd_mesh, "Poisson mesh and free space of a round's map"),
+        ("score", cmd_score, "random candidates scored by the rendering-quality heuristic"),
+        ("goals", cmd_goals, "the best goals; whether exploration is complete"),
+        ("plan", cmd_plan, "navigation grid and paths to the goals"),
+    ):
+        sp = sub.add_parser(name, help=text)
+        with_config(sp)
+        sp.add_argument("--round-dir", required=True, help="results/<scene>/round_XXX")
+        sp.set_defaults(func=func)
+
+    d = sub.add_parser("dense", help="dense multi-view stereo and fusion of a map")
+    with_config(d)
+    d.add_argument("--sparse", required=True, help="COLMAP model folder (round_XXX/sfm)")
+    d.add_argument("--images", required=True, help="folder the model's image names live in")
+    d.add_argument("--out", required=True, help="dense workspace (final/dense)")
+    d.set_defaults(func=cmd_dense)
+
+    e = sub.add_parser(
+        "nxt-emulator",
+        help="serve the NXT brick emulator on a pseudo-terminal (prints the port to use)",
+    )
+    with_config(e)
+    e.add_argument("--inbox", help="folder the emulated Wi-Fi card writes photos to")
+    e.set_defaults(func=cmd_nxt_emulator)
 
     s = sub.add_parser("schema", help="print (or --write) the config JSON schema")
     s.add_argument("--write", action="store_true")

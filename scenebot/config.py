@@ -17,6 +17,13 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from scenebot.dense.config import DenseConfig
+from scenebot.localize.config import LocalizeConfig
+from scenebot.plan.config import PlanConfig
+from scenebot.robot.nxt.config import EmulatorConfig, NxtConfig
+from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
+from scenebot.sfm.config import SfmConfig
+
 SCHEMA_PATH = Path(__file__).with_name("config.schema.json")
 
 
@@ -158,6 +165,14 @@ class ExplorationConfig(_Model):
         return self
 
 
+class PhotosConfig(_Model):
+    """Bring-your-own photos (``robot: photos``)."""
+
+    folder: Path | None = Field(
+        None, description="Folder of JPEGs (not recursive) that make round 0; never modified."
+    )
+
+
 class Config(_Model):
     """A scenebot campaign."""
 
@@ -166,11 +181,35 @@ class Config(_Model):
         pattern=r"^[A-Za-z0-9_.-]+$",
         description="Name of the campaign: results go to results/<scene>/.",
     )
-    robot: Literal["sim"] = Field("sim", description="Robot backend.")
+    robot: Literal["sim", "nxt", "nxt-emulated", "photos"] = Field(
+        "sim",
+        description=(
+            "Robot backend: the simulator, a LEGO NXT on a serial port (nxt.port), the NXT "
+            "driver against the brick emulator on a pseudo-terminal backed by the simulator, "
+            "or `photos`: no robot, round 0 is the folder of JPEGs in photos.folder."
+        ),
+    )
     seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
     world: WorldConfig = WorldConfig()
     sim: SimConfig = SimConfig()
     exploration: ExplorationConfig = ExplorationConfig()
+    photos: PhotosConfig = PhotosConfig()
+    nxt: NxtConfig = NxtConfig()
+    nxt_emulator: EmulatorConfig = EmulatorConfig()
+    sfm: SfmConfig = SfmConfig()
+    mesh: MeshConfig = MeshConfig()
+    score: ScoreConfig = ScoreConfig()
+    goals: GoalsConfig = GoalsConfig()
+    plan: PlanConfig = PlanConfig()
+    localize: LocalizeConfig = LocalizeConfig()
+    dense: DenseConfig = DenseConfig()
+
+
+    @model_validator(mode="after")
+    def _photos_folder(self) -> Config:
+        if self.robot == "photos" and self.photos.folder is None:
+            raise ValueError("robot: photos needs photos.folder (a folder of JPEG photos)")
+        return self
 
 
 # ---------------------------------------------------------------------------- loading

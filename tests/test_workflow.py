@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -74,3 +75,80 @@ def test_workflow_lint_and_format_are_clean():
         cwd=ROOT, capture_output=True, text=True,
     )  # fmt: skip
     assert fmt.returncode == 0, fmt.stderr
+
+
+@pytest.mark.slow
+def test_round0_capture_through_the_nxt_driver_and_the_brick_emulator(workdir):
+    """robot: nxt-emulated: the exact bytes of the hardware path, the same artifacts."""
+    cfg = dict(SMALL, robot="nxt-emulated", exploration={"photos": 8})
+    cfg["nxt_emulator"] = {"time_scale": 4.0}
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
+    res = snakemake(workdir, f"{'results/office/round_000/capture/log.jsonl'}")
+    assert res.returncode == 0, res.stderr[-3000:]
+    capture = workdir / "results/office/round_000/capture"
+    records = [json.loads(line) for line in (capture / "log.jsonl").read_text().splitlines()]
+    assert records[0]["robot"] == "nxt-emulated"
+    photos = [r for r in records if r["type"] == "photo"]
+    assert len(photos) == 8 and len(list((capture / "images").glob("*.jpg"))) == 8
+    assert all({"odometry", "compass_deg", "ultrasonic_cm", "truth"} <= p.keys() for p in photos)
+    assert (capture / "trajectory.png").is_file()
+    assert not any((capture / "inbox").iterdir())  # every photo moved, none left behind
+
+
+CANNED = ROOT / "tests" / "data" / "canned" / "round_000" / "capture"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
+def test_every_stage_runs_on_the_canned_photo_set(workdir):
+    """The committed 320x240 office photos through every stage that exists."""
+    cfg = dict(
+        SMALL,
+        sim={"camera": {"width": 320, "height": 240}},
+        sfm={"peak_threshold": 0.002},
+        score={"n_candidates": 300},
+        dense={"max_image_size": 320},
+    )
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
+    capture = workdir / "results/office/round_000/capture"
+    shutil.copytree(CANNED, capture)
+    # the photos are given: mark the capture up to date instead of taking new ones
+    trajectory = capture / "trajectory.png"
+    if not trajectory.exists():
+        from scenebot.capture import plot_trajectory
+
+        plot_trajectory(capture / "log.jsonl", trajectory)
+    touched = snakemake(workdir, "--touch", str(capture / "log.jsonl"), str(trajectory))
+    assert touched.returncode == 0, touched.stderr[-3000:]
+    res = snakemake(workdir)
+    assert res.returncode == 0, res.stderr[-4000:]
+    assert not (capture / "superseded").exists()  # the given photos were not re-taken
+    r0 = workdir / "results/office/round_000"
+    products = "sfm/images.bin sfm/point_descriptors.npz sfm/map.png mesh.ply freespace.png"
+    products += " candidates.csv goals.json paths.json navgrid.png"
+    for name in products.split():
+        assert (r0 / name).stat().st_size > 0, name
+    goals = json.loads((r0 / "goals.json").read_text())
+    assert "complete" in goals and goals["goals"]
+    assert (workdir / "results/office/final/dense/fused.ply").stat().st_size > 1000
+    assert snakemake(workdir, "-n").stdout.count("Nothing to be done") == 1
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
+def test_bring_your_own_photos_make_round_0(workdir):
+    """robot: photos: a plain folder of JPEGs (no log, no robot) becomes round 0's map."""
+    folder = workdir / "my_photos"
+    folder.mkdir()
+    for p in sorted((CANNED / "images").glob("*.jpg"))[::2]:
+        shutil.copy(p, folder / p.name)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    cfg = dict(SMALL, robot="photos", photos={"folder": str(folder)})
+    cfg["sfm"] = {"peak_threshold": 0.002}
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
+    res = snakemake(workdir, "results/office/round_000/sfm/map.png")
+    assert res.returncode == 0, res.stderr[-3000:]
+    report = json.loads((workdir / "results/office/round_000/sfm/report.json").read_text())
+    assert report["registered"] >= 0.8 * report["photos"]
+    assert not (workdir / "results/office/round_000/capture").exists()  # no robot ran
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before  # photos untouched

@@ -1,8 +1,8 @@
 """Path planning (paper section IV.B): navigation grid, A*, simplification, the plan stage."""
 
 from scenebot.plan.config import PlanConfig
-from scenebot.plan.navgrid import GridGeometry, NavGrid, build_navgrid
-from scenebot.plan.path import PlanFailure, PlanFailureReason, PlannedPath, plan_path
+
+_LAZY = ("scenebot.plan.navgrid", "scenebot.plan.path")
 
 __all__ = [
     "GridGeometry",
@@ -14,3 +14,15 @@ __all__ = [
     "build_navgrid",
     "plan_path",
 ]
+
+
+def __getattr__(name: str):
+    """Import the heavy modules (OpenCV, pycolmap, scipy) only when used: the workflow loads
+    this package's config at every start."""
+    import importlib
+
+    for module in _LAZY:
+        mod = importlib.import_module(module)
+        if hasattr(mod, name):
+            return getattr(mod, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

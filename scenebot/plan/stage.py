@@ -173,9 +173,18 @@ def run(
     points, centres, _, headings = read_map_geometry(inputs.sfm_dir, with_headings=True)
     if len(centres) == 0:
         raise ValueError(f"{inputs.sfm_dir}: the model has no registered images")
-    grid = build_navgrid(points, centres[:, :2], cfg)
-    grid.save(outputs.navgrid_npz)
     goals = read_goals(inputs.goals_json)
+    # the explored area: where the robot has been and where it is asked to go (goals lie in
+    # the map's free space, which reaches beyond the camera positions); a goal outside the
+    # map's points is no part of it and is skipped as outside the grid
+    extent = centres[:, :2]
+    if goals and len(points):
+        gxy = np.array([[g["x"], g["y"]] for g in goals], float)
+        lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+        inside = np.all((gxy >= lo) & (gxy <= hi), axis=1)
+        extent = np.vstack([extent, gxy[inside]])
+    grid = build_navgrid(points, extent, cfg)
+    grid.save(outputs.navgrid_npz)
     if start_xy is not None:
         start = np.asarray(start_xy, float)
     else:

@@ -11,10 +11,32 @@ Entry points for the lead:
 
 from __future__ import annotations
 
-from scenebot.robot.nxt.camera import NxtCamera
-from scenebot.robot.nxt.client import Clock, NxtClient, open_serial
+from typing import TYPE_CHECKING
+
 from scenebot.robot.nxt.config import EmulatorConfig, FaultConfig, NxtCameraConfig, NxtConfig
-from scenebot.robot.nxt.robot import NxtRobot, install_sigterm_handler
+
+if TYPE_CHECKING:
+    from scenebot.robot.nxt.camera import NxtCamera
+    from scenebot.robot.nxt.client import Clock, NxtClient
+    from scenebot.robot.nxt.robot import NxtRobot
+
+_LAZY = {
+    "NxtCamera": "scenebot.robot.nxt.camera",
+    "NxtClient": "scenebot.robot.nxt.client",
+    "Clock": "scenebot.robot.nxt.client",
+    "open_serial": "scenebot.robot.nxt.client",
+    "NxtRobot": "scenebot.robot.nxt.robot",
+    "install_sigterm_handler": "scenebot.robot.nxt.robot",
+}
+
+
+def __getattr__(name: str):
+    """Import the driver modules only when used: the workflow loads the config at start."""
+    import importlib
+
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "EmulatorConfig",
@@ -35,6 +57,7 @@ def connect(cfg: NxtConfig, clock: Clock | None = None) -> NxtClient:
     Raises:
         PortNotFoundError, PortBusyError, BrickNotAnsweringError: with what to check.
     """
+    from scenebot.robot.nxt.client import NxtClient, open_serial
 
     def opener():
         return open_serial(cfg.port, cfg.baudrate)
@@ -84,7 +107,9 @@ def make_nxt_robot(
     Returns:
         ``(robot, camera)``; use ``with robot:`` (or call ``robot.close()``) on every path.
     """
+    from scenebot.robot.nxt.camera import NxtCamera
     from scenebot.robot.nxt.emulator import NxtEmulator
+    from scenebot.robot.nxt.robot import NxtRobot, install_sigterm_handler
 
     emu = None
     if world is not None:

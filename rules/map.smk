@@ -1,0 +1,133 @@
+# The map of each round and what it decides (paper IV.B): structure from motion in the robot's
+# frame, Poisson mesh and free space, candidates scored by the rendering-quality heuristic,
+# goals, and paths to them over the navigation grid.
+
+MODEL_FILES = ["cameras.bin", "images.bin", "points3D.bin"]
+
+
+wildcard_constraints:
+    r=r"\d{3}",
+
+
+rule sfm:
+    input:
+        code=stage_code("sfm"),
+        captures=captures_until,
+    output:
+        model=multiext(
+            f"{RESULTS}/round_{{r}}/sfm/",
+            "cameras.bin",
+            "images.bin",
+            "points3D.bin",
+            "point_descriptors.npz",
+        ),
+        map=f"{RESULTS}/round_{{r}}/sfm/map.png",
+        report=f"{RESULTS}/round_{{r}}/sfm/report.json",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/sfm.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/sfm.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    threads: workflow.cores
+    params:
+        py=PY,
+        cfg=stage_params("sfm", "photos"),
+        scene_dir=lambda w, output: Path(output.report).parents[2],
+    shell:
+        "{params.py:q} -m scenebot sfm --params {params.cfg:q} "
+        "--scene-dir {params.scene_dir:q} --round {wildcards.r} 2> >(tee {log:q} >&2)"
+
+
+rule mesh:
+    input:
+        code=stage_code("mesh"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+    output:
+        mesh=f"{RESULTS}/round_{{r}}/mesh.ply",
+        freespace=multiext(f"{RESULTS}/round_{{r}}/freespace", ".json", ".npz", ".png"),
+    log:
+        f"{RESULTS}/logs/round_{{r}}/mesh.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/mesh.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("mesh"),
+        round_dir=lambda w, output: Path(output.mesh).parent,
+    shell:
+        "{params.py:q} -m scenebot mesh --params {params.cfg:q} "
+        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+
+
+rule score:
+    input:
+        code=stage_code("score"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+        mesh=f"{RESULTS}/round_{{r}}/mesh.ply",
+        freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
+    output:
+        candidates=f"{RESULTS}/round_{{r}}/candidates.csv",
+        views=f"{RESULTS}/round_{{r}}/score_views.png",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/score.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/score.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    threads: workflow.cores
+    params:
+        py=PY,
+        cfg=stage_params("score"),
+        round_dir=lambda w, output: Path(output.candidates).parent,
+    shell:
+        "{params.py:q} -m scenebot score --params {params.cfg:q} "
+        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+
+
+rule goals:
+    input:
+        code=stage_code("goals"),
+        candidates=f"{RESULTS}/round_{{r}}/candidates.csv",
+        freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
+    output:
+        goals=f"{RESULTS}/round_{{r}}/goals.json",
+        picture=f"{RESULTS}/round_{{r}}/goals.png",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/goals.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/goals.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("goals"),
+        round_dir=lambda w, output: Path(output.goals).parent,
+    shell:
+        "{params.py:q} -m scenebot goals --params {params.cfg:q} "
+        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+
+
+rule plan:
+    input:
+        code=stage_code("plan"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+        goals=f"{RESULTS}/round_{{r}}/goals.json",
+    output:
+        navgrid=f"{RESULTS}/round_{{r}}/navgrid.npz",
+        paths=f"{RESULTS}/round_{{r}}/paths.json",
+        picture=f"{RESULTS}/round_{{r}}/navgrid.png",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/plan.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/plan.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("plan", "sim"),
+        round_dir=lambda w, output: Path(output.paths).parent,
+    shell:
+        "{params.py:q} -m scenebot plan --params {params.cfg:q} "
+        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
