@@ -204,7 +204,6 @@ class Config(_Model):
     localize: LocalizeConfig = LocalizeConfig()
     dense: DenseConfig = DenseConfig()
 
-
     @model_validator(mode="after")
     def _photos_folder(self) -> Config:
         if self.robot == "photos" and self.photos.folder is None:
