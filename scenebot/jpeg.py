@@ -79,22 +79,41 @@ def write_jpeg(
     return path
 
 
-def exif_focal_px(path: Path) -> float | None:
-    """Focal length in pixels from a JPEG's EXIF (focal-plane resolution, then 35 mm).
+def read_exif_focal(img: Image.Image) -> tuple[float | None, str]:
+    """Focal length in pixels from an opened photo's EXIF, and where it came from.
 
-    Returns ``None`` when the photo carries no usable focal length.
+    Order: FocalLength (mm) times FocalPlaneXResolution (px per unit, exact for the simulator
+    and most cameras), else FocalLengthIn35mmFilm scaled by the image diagonal (the 35 mm
+    definition uses the 43.27 mm diagonal). pycolmap's own EXIF reader uses only the 35 mm
+    value or a sensor database, so SfM sets its camera prior from this function.
+
+    Returns:
+        ``(focal_px, source)`` with source ``exif_focal_plane`` or ``exif_35mm``;
+        ``(None, "none")`` when EXIF has no usable focal length.
     """
+    ifd = img.getexif().get_ifd(EXIF_IFD)
+    w, h = img.size
+    f_mm = _as_float(ifd.get(TAG_FOCAL_LENGTH))
+    xres = _as_float(ifd.get(TAG_FOCAL_PLANE_XRES))
+    unit = ifd.get(TAG_FOCAL_PLANE_UNIT, 2) or 2
+    mm_per_unit = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}.get(int(unit))
+    if f_mm > 0 and xres > 0 and mm_per_unit:
+        return f_mm * xres / mm_per_unit, "exif_focal_plane"
+    f35 = _as_float(ifd.get(TAG_FOCAL_35MM))
+    if f35 > 0:
+        return f35 / FULL_FRAME_DIAGONAL_MM * math.hypot(w, h), "exif_35mm"
+    return None, "none"
+
+
+def _as_float(v) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return float("nan")
+    return x if math.isfinite(x) else float("nan")
+
+
+def exif_focal_px(path: Path) -> float | None:
+    """Focal length in pixels from a JPEG file's EXIF (see :func:`read_exif_focal`)."""
     with Image.open(path) as im:
-        w, h = im.size
-        exif = im.getexif()
-        ifd = exif.get_ifd(EXIF_IFD)
-    f_mm = ifd.get(TAG_FOCAL_LENGTH)
-    xres = ifd.get(TAG_FOCAL_PLANE_XRES)
-    unit = ifd.get(TAG_FOCAL_PLANE_UNIT)
-    if f_mm and xres and unit in (2, 3, 4, 5):
-        mm_per_unit = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}[unit]
-        return float(f_mm) * float(xres) / mm_per_unit
-    f35 = ifd.get(TAG_FOCAL_35MM)
-    if f35:
-        return float(f35) / FULL_FRAME_DIAGONAL_MM * math.hypot(w, h)
-    return None
+        return read_exif_focal(im)[0]

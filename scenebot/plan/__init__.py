@@ -1,5 +1,6 @@
 """Path planning (paper section IV.B): navigation grid, A*, simplification, the plan stage."""
 
+from scenebot._lazy import lazy_getattr
 from scenebot.plan.config import PlanConfig
 
 _LAZY = ("scenebot.plan.navgrid", "scenebot.plan.path")
@@ -16,13 +17,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    """Import the heavy modules (OpenCV, pycolmap, scipy) only when used: the workflow loads
-    this package's config at every start."""
-    import importlib
-
-    for module in _LAZY:
-        mod = importlib.import_module(module)
-        if hasattr(mod, name):
-            return getattr(mod, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY)

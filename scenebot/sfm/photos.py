@@ -2,31 +2,23 @@
 
 Photos are only read, never modified, moved or deleted. Every photo is checked before
 SfM touches it (a corrupt or truncated JPEG stops the run with a message naming it), and
-its focal length is read from EXIF (see :func:`exif_focal_px`).
+its focal length is read from EXIF (see :func:`scenebot.jpeg.read_exif_focal`).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from PIL import Image, UnidentifiedImageError
 
 from scenebot.capturelog import photo_records
+from scenebot.jpeg import read_exif_focal
 
 log = logging.getLogger(__name__)
 
 JPEG_SUFFIXES = {".jpg", ".jpeg", ".JPG", ".JPEG"}
-
-# EXIF tags (Exif IFD 0x8769)
-_EXIF_IFD = 0x8769
-_FOCAL_LENGTH = 0x920A
-_FOCAL_35MM = 0xA405
-_FOCAL_PLANE_XRES = 0xA20E
-_FOCAL_PLANE_UNIT = 0xA210
-_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}  # EXIF resolution unit -> mm
 
 
 class PhotoError(ValueError):
@@ -66,42 +58,6 @@ class Photo:
     truth: dict | None = field(default=None, repr=False)
 
 
-def _rational(v) -> float:
-    try:
-        return float(v)
-    except (TypeError, ValueError, ZeroDivisionError):
-        return float("nan")
-
-
-def exif_focal_px(img: Image.Image) -> tuple[float | None, str]:
-    """Focal length in pixels from a photo's EXIF.
-
-    Order: FocalLength (mm) times FocalPlaneXResolution (px per unit, converted to px/mm,
-    exact for the simulator and most cameras), else FocalLengthIn35mmFilm scaled by the image
-    diagonal (the 35 mm definition uses the 43.27 mm diagonal). pycolmap's own EXIF reader
-    uses only the 35 mm value against the longest side or a sensor database, so the camera
-    prior is set from this function instead.
-
-    Args:
-        img: an opened PIL image (full-resolution original).
-
-    Returns:
-        ``(focal_px, source)``; ``(None, "none")`` when EXIF has no usable focal.
-    """
-    exif = img.getexif()
-    ifd = exif.get_ifd(_EXIF_IFD)
-    w, h = img.size
-    f_mm = _rational(ifd.get(_FOCAL_LENGTH))
-    xres = _rational(ifd.get(_FOCAL_PLANE_XRES))
-    unit_mm = _UNIT_MM.get(int(ifd.get(_FOCAL_PLANE_UNIT, 2) or 2))
-    if math.isfinite(f_mm) and f_mm > 0 and math.isfinite(xres) and xres > 0 and unit_mm:
-        return f_mm * xres / unit_mm, "exif_focal_plane"
-    f35 = _rational(ifd.get(_FOCAL_35MM))
-    if math.isfinite(f35) and f35 > 0:
-        return f35 / math.hypot(36.0, 24.0) * math.hypot(w, h), "exif_35mm"
-    return None, "none"
-
-
 def inspect_photo(photo: Photo) -> None:
     """Decode ``photo`` completely (catches corrupt and truncated JPEGs) and read its EXIF.
 
@@ -120,7 +76,7 @@ def inspect_photo(photo: Photo) -> None:
             if img.format != "JPEG":
                 raise PhotoError(f"{photo.path} is a {img.format} file, not a JPEG")
             photo.width, photo.height = img.size
-            photo.focal_px, photo.focal_source = exif_focal_px(img)
+            photo.focal_px, photo.focal_source = read_exif_focal(img)
     except (OSError, UnidentifiedImageError, SyntaxError) as exc:
         raise PhotoError(f"{photo.path}: corrupt or truncated JPEG ({exc})") from exc
 

@@ -18,6 +18,7 @@ import numpy as np
 from PIL import Image
 
 from scenebot.capturelog import CaptureLog
+from scenebot.jpeg import write_jpeg
 
 
 @dataclass
@@ -123,21 +124,16 @@ def write_jpeg_with_exif(
     resolution (px per cm) of a 4.8 mm wide sensor, so ``focal_px`` can be recovered
     exactly. ``focal_px=None`` writes no focal tags (for the "no EXIF focal" case).
     """
-    h, w = rgb.shape[:2]
-    img = Image.fromarray(rgb)
-    exif = Image.Exif()
-    exif[0x010F] = "scenebot"
-    exif[0x0110] = "synthetic room camera"
-    if focal_px is not None:
-        sensor_width_mm = 4.8
-        px_per_mm = w / sensor_width_mm
-        ifd = exif.get_ifd(0x8769)
-        ifd[0x920A] = float(focal_px / px_per_mm)  # FocalLength (mm)
-        ifd[0xA405] = round(focal_px / math.hypot(w, h) * math.hypot(36.0, 24.0))
-        ifd[0xA20E] = float(px_per_mm * 10.0)  # FocalPlaneXResolution (px per cm)
-        ifd[0xA20F] = float(px_per_mm * 10.0)
-        ifd[0xA210] = 3  # FocalPlaneResolutionUnit: cm
-    img.save(path, "JPEG", quality=quality, exif=exif.tobytes())
+    if focal_px is None:
+        exif = Image.Exif()
+        exif[0x010F] = "scenebot"
+        exif[0x0110] = "synthetic room camera"
+        Image.fromarray(rgb).save(path, "JPEG", quality=quality, exif=exif.tobytes())
+        return
+    write_jpeg(
+        Path(path), rgb, focal_px, sensor_width_mm=4.8, quality=quality,
+        model="synthetic room camera",
+    )  # fmt: skip
 
 
 def circle_spots(room: SyntheticRoom, n_spots: int, rng: np.random.Generator) -> np.ndarray:
