@@ -65,7 +65,9 @@ PHOTOS = CFG.robot == "photos"  # bring-your-own photos: round 0 is a folder, no
 def campaign_targets():
     """What `snakemake` builds by default: the campaign as far as its stages exist."""
     r0 = f"{RESULTS}/round_000"
-    captured = [] if PHOTOS else [f"{r0}/capture/log.jsonl", f"{r0}/capture/trajectory.png"]
+    captured = (
+        [] if PHOTOS else [f"{r0}/capture/log.jsonl", f"{r0}/capture/trajectory.png"]
+    )
     return captured + [
         f"{r0}/sfm/map.png",
         f"{r0}/goals.json",
@@ -81,7 +83,9 @@ def captures_until(wildcards):
     r = int(wildcards.r)
     if PHOTOS and r == 0:
         folder = Path(CFG.photos.folder)
-        return sorted(str(p) for p in folder.glob("*") if p.suffix.lower() in (".jpg", ".jpeg"))
+        return sorted(
+            str(p) for p in folder.glob("*") if p.suffix.lower() in (".jpg", ".jpeg")
+        )
     return [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(r + 1)]
 
 
