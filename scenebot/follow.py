@@ -28,7 +28,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from scenebot.capturelog import CaptureLog
-from scenebot.localize.localize import FailureReason, LocalizationFailure, PoseEstimate
+from scenebot.localize.locate import FailureReason, LocalizationFailure, PoseEstimate
 from scenebot.plan.path import PlanFailure, PlannedPath
 from scenebot.robot.base import Camera, MotionResult, MotionStatus, Pose2D, Robot, wrap_angle
 
@@ -199,7 +199,7 @@ class PathFollower:
         robot: the robot.
         camera: its camera.
         localizer: photo path -> pose estimate or failure (e.g. a closure over
-            :func:`scenebot.localize.localize` and a loaded map).
+            :func:`scenebot.localize.locate` and a loaded map).
         planner: (start_xy, goal_xy) -> path or failure; if it has ``mark_obstacle(xy, r)``
             (:class:`scenebot.plan.path.GridPlanner`), bumps are marked on its grid.
         cfg: follow settings.

@@ -11,7 +11,7 @@ import pytest
 
 from scenebot.capturelog import CaptureLog, read_log
 from scenebot.follow import FollowConfig, PathFollower, compose_odometry, robot_pose_from_camera
-from scenebot.localize.localize import FailureReason, LocalizationFailure, PoseEstimate
+from scenebot.localize.locate import FailureReason, LocalizationFailure, PoseEstimate
 from scenebot.localize.synthetic import camera_rotation
 from scenebot.plan import PlanConfig, build_navgrid
 from scenebot.plan.path import GridPlanner

@@ -21,7 +21,7 @@ from scenebot.follow import FollowConfig, PathFollower
 from scenebot.localize import LocalizationMap, LocalizeConfig, localize
 from scenebot.localize.features import extract_sift, load_gray
 from scenebot.localize.index import MapDescriptors
-from scenebot.localize.localize import PoseEstimate
+from scenebot.localize.locate import PoseEstimate
 from scenebot.plan import PlanConfig, build_navgrid
 from scenebot.plan.path import GridPlanner
 from scenebot.robot.base import Camera

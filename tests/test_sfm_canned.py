@@ -27,7 +27,9 @@ def test_canned_office_round0(tmp_path):
     cap = tmp_path / "scene" / "round_000" / "capture"
     shutil.copytree(CANNED, cap)
     out = SfmOutputs(tmp_path / "scene" / "round_000" / "sfm")
-    cfg = SfmConfig(peak_threshold=0.002)  # small photos: more SIFT features
+    # small photos: more SIFT features; one thread makes mapping repeatable (with several
+    # threads the 320x240 set occasionally bent by ~15 cm in CI: a known fragility)
+    cfg = SfmConfig(peak_threshold=0.002, num_threads=1)
     report = run(cfg, SfmInputs(tmp_path / "scene" / "sfm_db" / "database.db", [cap]), out)
     assert report["registered"] >= 0.9 * report["photos"]
     assert report["alignment"]["scale_source"] == "odometry"

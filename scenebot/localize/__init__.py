@@ -1,9 +1,11 @@
-"""Visual localization (paper section IV.B): SIFT, FLANN KD-tree matching, DLT/P3P pose."""
+"""Visual localization (paper section IV.B): SIFT, FLANN KD-tree matching, DLT/P3P pose.
+
+The algorithms (OpenCV, pycolmap, scipy) load on first use: the workflow imports this
+package's config at every start.
+"""
 
 from scenebot._lazy import lazy_getattr
 from scenebot.localize.config import LocalizeConfig
-
-_LAZY = ("scenebot.localize.index", "scenebot.localize.localize")
 
 __all__ = [
     "DescriptorIndex",
@@ -17,5 +19,4 @@ __all__ = [
     "make_localizer",
 ]
 
-
-__getattr__ = lazy_getattr(__name__, _LAZY)
+__getattr__ = lazy_getattr(__name__, ("scenebot.localize.index", "scenebot.localize.locate"))
