@@ -6,12 +6,17 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 CORES  ?= 2
-# Debian packages the project needs: libusb for open3d's import.
+# Debian packages the project needs: libusb for open3d's import; the tests also drive the
+# tour's web viewer in headless Chromium (Selenium with Debian's chromedriver, no downloads).
 APT_PACKAGES := libusb-1.0-0
+TEST_APT_PACKAGES := chromium chromium-driver
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export TI_SKIP_VERSION_CHECK := ON
 
-.PHONY: demo test test-fast lint format system install clean-results
+.PHONY: demo test test-fast lint format system system-test install clean-results
+
+system-test: APT_PACKAGES += $(TEST_APT_PACKAGES)
+system-test: system
 
 system:
 	@missing=""; for p in $(APT_PACKAGES); do \
@@ -39,7 +44,7 @@ lint: install
 	$(BIN)/snakefmt --check Snakefile rules/
 	$(BIN)/snakemake --lint
 
-test: lint
+test: system-test lint
 	$(BIN)/python -m pytest -m "not hardware and not gpu"
 
 test-fast: install

@@ -14,9 +14,11 @@ include: "rules/common.smk"
 include: "rules/capture.smk"
 include: "rules/map.smk"
 include: "rules/final.smk"
+include: "rules/tour.smk"
+include: "rules/evaluate.smk"
 
 
 rule all:
     default_target: True
     input:
-        campaign_targets(),
+        campaign_targets,

@@ -1,10 +1,9 @@
 # Round 0: random exploration with the configured robot (paper IV.A).
-# Photos are never deleted: a re-run moves an earlier attempt to capture/superseded/.
+# Photos are data: a capture re-runs when its settings change, not when code changes (re-take
+# on purpose with --forcerun); a re-run moves an earlier attempt to capture/superseded/.
 
 
 rule capture_round0:
-    input:
-        code=stage_code("capture"),
     output:
         log=f"{RESULTS}/round_000/capture/log.jsonl",
         trajectory=f"{RESULTS}/round_000/capture/trajectory.png",
@@ -24,3 +23,41 @@ rule capture_round0:
     shell:
         "{params.py:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "
         "2> >(tee {log:q} >&2)"
+
+
+# Rounds >= 1: drive to the previous round's goals, localizing visually, and take photos there.
+rule capture_adaptive:
+    input:
+        previous=previous_round,
+    output:
+        log=f"{RESULTS}/round_{{r}}/capture/log.jsonl",
+        trajectory=f"{RESULTS}/round_{{r}}/capture/trajectory.png",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/capture.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/capture.tsv"
+    wildcard_constraints:
+        r=r"(?!000)\d{3}",
+    localrule: True
+    conda:
+        "../envs/scenebot.yaml"
+    resources:
+        robot=1,
+    params:
+        py=PY,
+        cfg=stage_params(
+            "world",
+            "sim",
+            "exploration",
+            "nxt",
+            "nxt_emulator",
+            "follow",
+            "adaptive",
+            "localize",
+            "plan",
+        ),
+        out=lambda w, output: Path(output.log).parent,
+        previous=lambda w: round_dir(int(w.r) - 1),
+    shell:
+        "{params.py:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "
+        "--round {wildcards.r} --previous {params.previous:q} 2> >(tee {log:q} >&2)"

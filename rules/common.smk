@@ -1,6 +1,8 @@
 # Helpers shared by all rules: config validation, stage parameters, code inputs.
+import json
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 from snakemake.utils import validate
 
@@ -18,19 +20,11 @@ PY = sys.executable  # there is no bare `python` on PATH outside the virtualenv
 SCENE = CFG.scene
 RESULTS = f"results/{SCENE}"
 PKG = Path(workflow.basedir) / "scenebot"
+MODEL_FILES = ["cameras.bin", "images.bin", "points3D.bin"]
 
-# The code each stage runs: a change re-runs exactly the stages that use it.
+# The code each stage runs: a change re-runs exactly the stages that use it. The captures are
+# not listed: photos are data, re-taken when capture settings change (or with --forcerun).
 STAGE_CODE = {
-    "capture": [
-        "__init__.py",
-        "capture.py",
-        "capturelog.py",
-        "explore.py",
-        "jpeg.py",
-        "robot",
-        "scene",
-        "sim",
-    ],
     "sfm": ["sfm", "capturelog.py", "jpeg.py"],
     "mesh": [
         "score/mesh.py",
@@ -42,6 +36,15 @@ STAGE_CODE = {
     "goals": ["score/goals.py", "score/plots.py", "score/stage.py"],
     "plan": ["plan", "score/geometry.py"],
     "dense": ["dense"],
+    "campaign": ["campaign.py", "capturelog.py"],
+    "tour": ["tour", "score/freespace.py"],
+    "evaluate": [
+        "evaluate",
+        "scene",
+        "sim/obstacles.py",
+        "sfm/evaluate.py",
+        "capturelog.py",
+    ],
 }
 
 
@@ -62,20 +65,63 @@ def stage_params(*sections):
 PHOTOS = CFG.robot == "photos"  # bring-your-own photos: round 0 is a folder, no robot
 
 
-def campaign_targets():
-    """What `snakemake` builds by default: the campaign as far as its stages exist."""
-    r0 = f"{RESULTS}/round_000"
-    captured = (
-        [] if PHOTOS else [f"{r0}/capture/log.jsonl", f"{r0}/capture/trajectory.png"]
-    )
-    return captured + [
-        f"{r0}/sfm/map.png",
-        f"{r0}/goals.json",
-        f"{r0}/goals.png",
-        f"{r0}/paths.json",
-        f"{r0}/navgrid.png",
+def campaign_targets(wildcards):
+    """What `snakemake` builds by default: the whole campaign, its products and (simulated
+    robots) its evaluation against the truth, per round and final."""
+    targets = [
+        f"{RESULTS}/campaign.json",
         f"{RESULTS}/final/dense/fused.ply",
+        f"{RESULTS}/final/tour/index.html",
     ]
+    return targets + (evaluation_products(wildcards) if SIMULATED else [])
+
+
+def round_dir(r):
+    return f"{RESULTS}/round_{int(r):03d}"
+
+
+def campaign_rounds():
+    """The rounds the campaign runs: 0, then one more while the last round's decisions (the
+    plan checkpoint, after goals.json) say the map is incomplete, up to max_rounds."""
+    rounds = [0]
+    limit = 1 if PHOTOS else CFG.max_rounds
+    while len(rounds) < limit:
+        r = f"{rounds[-1]:03d}"
+        checkpoints.plan.get(r=r)
+        goals = Path(f"{RESULTS}/round_{r}/goals.json")
+        if json.loads(goals.read_text(encoding="utf-8"))["complete"]:
+            break
+        rounds.append(rounds[-1] + 1)
+    return rounds
+
+
+def round_products(wildcards):
+    """Every file each round of the campaign leaves (maps, decisions, pictures)."""
+    files = []
+    for r in campaign_rounds():
+        d = round_dir(r)
+        if not (PHOTOS and r == 0):
+            files += [f"{d}/capture/log.jsonl", f"{d}/capture/trajectory.png"]
+        files += [f"{d}/sfm/{f}" for f in ("report.json", "map.png")]
+        files += [
+            f"{d}/{f}" for f in ("goals.json", "goals.png", "paths.json", "navgrid.png")
+        ]
+    return files
+
+
+def last_round_model(wildcards):
+    """The map of the campaign's last round (dense and the tour use it)."""
+    return [f"{round_dir(campaign_rounds()[-1])}/sfm/{f}" for f in MODEL_FILES]
+
+
+def previous_round(wildcards):
+    """What adaptive capture of round r waits for: round r-1's decisions (map, goals, paths,
+    grid: the plan checkpoint) and photos. Only round r-1's capture log is an input: rebuilding
+    a map or a decision later never re-takes round r's photos; re-taking round r-1 does.
+    """
+    prev = f"{int(wildcards.r) - 1:03d}"
+    checkpoints.plan.get(r=prev)
+    return [f"{RESULTS}/round_{prev}/capture/log.jsonl"]
 
 
 def captures_until(wildcards):
@@ -89,11 +135,41 @@ def captures_until(wildcards):
     return [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(r + 1)]
 
 
-def image_root(input):
-    """The folder the map's image names are relative to (the scene folder, or the photos)."""
-    return CFG.photos.folder if PHOTOS else Path(input.model[0]).parents[2]
+def image_root(scene_dir):
+    """The folder the map's image names are relative to: the scene folder (results/<scene>,
+    names like round_000/capture/images/r000_0000.jpg), or the photo folder."""
+    return CFG.photos.folder if PHOTOS else scene_dir
 
 
-def last_round():
-    """The round whose map the dense model and the tour use."""
-    return "000"
+def last_round_freespace(wildcards):
+    """The free space of the campaign's last round (keeps the tour path off the geometry)."""
+    return f"{round_dir(campaign_rounds()[-1])}/freespace.npz"
+
+
+SIMULATED = CFG.robot in ("sim", "nxt-emulated")  # the true scene is known
+
+
+def observable_input(wildcards):
+    """The observable surface, for simulated robots (no true scene otherwise)."""
+    return [f"{RESULTS}/eval/observable_surface.npz"] if SIMULATED else []
+
+
+def last_round_index(wildcards):
+    """The campaign's last round (the one dense and the tour use)."""
+    return campaign_rounds()[-1]
+
+
+def captures_of_campaign(wildcards):
+    """The capture logs of every round of the campaign."""
+    return captures_until(SimpleNamespace(r=f"{last_round_index(wildcards):03d}"))
+
+
+def evaluation_products(wildcards):
+    """Every round's evaluation and the observable surface (for `rule all` or `campaign`)."""
+    files = [f"{RESULTS}/eval/observable_surface.png"] if SIMULATED else []
+    for r in campaign_rounds():
+        files += [f"{round_dir(r)}/evaluation.json", f"{round_dir(r)}/evaluation.png"]
+    return files + [
+        f"{RESULTS}/final/evaluation.json",
+        f"{RESULTS}/final/evaluation.png",
+    ]

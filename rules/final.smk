@@ -1,10 +1,32 @@
-# The products of the campaign: dense multi-view stereo on the last round's map.
+# The products of the campaign: its summary, and dense multi-view stereo on the last round's map.
+
+
+rule campaign:
+    input:
+        code=stage_code("campaign"),
+        rounds=round_products,
+    output:
+        summary=f"{RESULTS}/campaign.json",
+        picture=f"{RESULTS}/campaign.png",
+    log:
+        f"{RESULTS}/logs/campaign.log",
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("goals"),
+        rounds=lambda w: ",".join(str(r) for r in campaign_rounds()),
+        scene_dir=lambda w, output: Path(output.summary).parent,
+    shell:
+        "{params.py:q} -m scenebot campaign --params {params.cfg:q} --scene-dir "
+        "{params.scene_dir:q} --rounds {params.rounds} --out {output.summary:q} "
+        "2> >(tee {log:q} >&2)"
 
 
 rule dense:
     input:
         code=stage_code("dense"),
-        model=expand(f"{RESULTS}/round_{last_round()}/sfm/{{f}}", f=MODEL_FILES),
+        model=last_round_model,
     output:
         fused=f"{RESULTS}/final/dense/fused.ply",
     log:
@@ -18,7 +40,7 @@ rule dense:
         py=PY,
         cfg=stage_params("dense"),
         sparse=lambda w, input: Path(input.model[0]).parent,
-        images=lambda w, input: image_root(input),
+        images=lambda w, output: image_root(Path(output.fused).parents[2]),
         out=lambda w, output: Path(output.fused).parent,
     shell:
         "{params.py:q} -m scenebot dense --params {params.cfg:q} --sparse {params.sparse:q} "

@@ -2,8 +2,6 @@
 # frame, Poisson mesh and free space, candidates scored by the rendering-quality heuristic,
 # goals, and paths to them over the navigation grid.
 
-MODEL_FILES = ["cameras.bin", "images.bin", "points3D.bin"]
-
 
 wildcard_constraints:
     r=r"\d{3}",
@@ -109,7 +107,9 @@ rule goals:
         "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
 
 
-rule plan:
+# A checkpoint: the last decision of a round. Whether the campaign goes on to another round
+# depends on what the round decided, and the next round's capture waits for it.
+checkpoint plan:
     input:
         code=stage_code("plan"),
         model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),

@@ -64,8 +64,12 @@ def _start_pose(cfg: Config, scene, collision_map) -> Pose2D:
     return Pose2D(float(xy[0]), float(xy[1]), 0.0)
 
 
-def make_sim_backend(cfg: Config):
-    """(robot, camera, world) of the simulator for ``cfg``."""
+def make_sim_backend(cfg: Config, start: Pose2D | None = None):
+    """(robot, camera, world) of the simulator for ``cfg``.
+
+    ``start``: the true start pose (world frame) when the world continues from an earlier
+    round (its ``sim_state.json``); default: the configured or the scene's start pose.
+    """
     from scenebot.robot.sim import SimCamera, SimRobot
     from scenebot.scene.loader import load_world_scene
     from scenebot.sim.obstacles import ObstacleMap
@@ -73,27 +77,29 @@ def make_sim_backend(cfg: Config):
 
     scene = load_world_scene(cfg.world)
     body = cfg.sim.body
-    if cfg.world.start is None and scene.start is None:
-        cmap = ObstacleMap.build(
-            scene, scene.floor_z + body.clearance_m, scene.floor_z + body.height_m
-        )
+    if start is None:
+        cmap = None
+        if cfg.world.start is None and scene.start is None:
+            cmap = ObstacleMap.build(
+                scene, scene.floor_z + body.clearance_m, scene.floor_z + body.height_m
+            )
         start = _start_pose(cfg, scene, cmap)
-    else:
-        start = _start_pose(cfg, scene, None)
     world = SimWorld(scene, cfg.sim, start, seed=cfg.seed)
     return SimRobot(world), SimCamera(world), world
 
 
-def make_backend(cfg: Config, capture_dir: Path):
+def make_backend(cfg: Config, capture_dir: Path, start: Pose2D | None = None):
     """(robot, camera, world or None) of the configured ``robot`` backend.
 
     ``sim``: the simulator. ``nxt``: a LEGO NXT on ``nxt.port`` with photos arriving in
     ``nxt.camera.inbox``. ``nxt-emulated``: the same driver talking, through a
     pseudo-terminal, to the brick emulator backed by the simulator; its Wi-Fi card writes to
-    ``<capture>/inbox`` so photos move into ``images/`` by rename.
+    ``<capture>/inbox`` so photos move into ``images/`` by rename. ``start``: for the
+    simulator backends, the true pose the world continues from (see
+    :func:`make_sim_backend`); a real robot is where it is.
     """
     if cfg.robot == "sim":
-        return make_sim_backend(cfg)
+        return make_sim_backend(cfg, start)
     from scenebot.robot.nxt.backend import make_nxt_backend
 
     emulated = cfg.robot == "nxt-emulated"
@@ -103,6 +109,7 @@ def make_backend(cfg: Config, capture_dir: Path):
         emulated=emulated,
         emulator=cfg.nxt_emulator,
         inbox=Path(capture_dir) / "inbox" if emulated else None,
+        start=start,
     )
 
 
@@ -118,6 +125,7 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
     Returns:
         The exploration summary (photos, bumps, stalls, circles) as a dict.
     """
+    from scenebot.adaptive import write_sim_state
     from scenebot.explore import PhotoTaker, random_exploration
 
     capture_dir = Path(capture_dir)
@@ -161,6 +169,7 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
         finally:
             bar.close()
             robot.stop()
+            write_sim_state(capture_dir, world)
         summary = asdict(result)
         if world is not None:
             summary["max_penetration_m"] = world.max_penetration_m

@@ -10,15 +10,21 @@ Record types (field ``type``):
     ``t`` (robot clock, s), ``index`` (0-based within the round), ``image`` (path relative to
     the capture folder, e.g. ``images/r000_0042.jpg``), ``odometry`` ``{x, y, theta}`` (m, rad,
     odometry frame, see :mod:`scenebot.robot.base`), ``compass_deg``, ``ultrasonic_cm``
-    (255 = no echo), ``bump_front``, ``bump_rear``, optional ``localization`` (visual
-    localization estimate, adaptive rounds), and for the simulator only ``truth``:
+    (255 = no echo), ``bump_front``, ``bump_rear``; in adaptive rounds (r >= 1) also
+    ``localization`` ``{x, y, theta}`` (the robot's map-frame pose: this photo's visual fix,
+    or the last fix carried forward by odometry, ``localization_source`` says which),
+    ``localization_ok``, ``localization_inliers``, ``goal_index`` and ``requested_heading``;
+    and for the simulator only ``truth``:
     ``{"robot": {x, y, theta}, "center": [x, y, z], "R_cam_from_world": 3x3 row-major}``
     in the world frame, camera axes as in OpenCV/COLMAP (x right, y down, z forward).
     ``truth`` is for evaluation only: no stage may read it to make a decision.
 ``event``
     ``t``, ``event`` (``bump``, ``stall``, ``drive``, ``turn``, ``circle_done``, ``backup``,
-    ``error``, ...), ``odometry``, plus event-specific fields; simulator events carry ``truth``
-    with the robot pose.
+    ``error``, ...; adaptive rounds: ``follow_start``, ``localize``, ``localize_failed``,
+    ``localize_rejected``, ``obstacle``, ``replan``, ``follow_end`` with an ``estimate`` of the
+    map-frame pose, and per goal one of ``goal_reached``, ``goal_abandoned``,
+    ``goal_skipped`` with ``goal_index``, ``goal`` and ``reason``), ``odometry``, plus
+    event-specific fields; simulator events carry ``truth`` with the robot pose.
 ``end`` (last line of a complete capture)
     ``t``, ``photos``, ``reason``.
 """

@@ -28,6 +28,16 @@ def cmd_capture(args) -> int:
     from scenebot.capture import run_capture
 
     cfg = _config(args)
+    if args.round > 0:
+        from scenebot.adaptive import run_adaptive
+
+        if not args.previous:
+            raise ValueError("capture --round >= 1 needs --previous results/<scene>/round_XXX")
+        summary = run_adaptive(
+            cfg, Path(args.out), args.round, Path(args.previous), progress=not args.no_progress
+        )
+        print(json.dumps(summary))
+        return 0
     summary = run_capture(cfg, Path(args.out), args.round, progress=not args.no_progress)
     print(json.dumps(summary))
     return 0
@@ -77,12 +87,11 @@ def cmd_plan(args) -> int:
     from scenebot.plan.stage import PlanInputs, PlanOutputs, run
 
     cfg, r = _config(args), Path(args.round_dir)
-    cam = cfg.sim.camera
     doc = run(
         cfg.plan,
         PlanInputs(r / "sfm", r / "goals.json"),
         PlanOutputs(r / "navgrid.npz", r / "paths.json", r / "navgrid.png"),
-        camera_offset_m=(cam.forward_offset_m, cam.lateral_offset_m),
+        camera_offset_m=cfg.camera_mount(),
     )
     print(json.dumps(doc, default=str)[:2000])
     return 0
@@ -94,6 +103,32 @@ def cmd_dense(args) -> int:
     cfg = _config(args)
     inputs = DenseInputs(Path(args.sparse), Path(args.images))
     print(json.dumps(run(cfg.dense, inputs, DenseOutputs(Path(args.out))), default=str))
+    return 0
+
+
+def cmd_tour(args) -> int:
+    from scenebot.tour.stage import TourInputs, TourOutputs, run
+
+    cfg = _config(args)
+    inputs = TourInputs(
+        Path(args.sparse),
+        Path(args.images),
+        Path(args.dense),
+        Path(args.freespace) if args.freespace else None,
+    )
+    summary = run(cfg.tour, inputs, TourOutputs(Path(args.out)), progress=not args.no_progress)
+    summary.pop("config", None)
+    print(json.dumps(summary, default=str)[:2000])
+    return 0
+
+
+def cmd_campaign(args) -> int:
+    from scenebot.campaign import write
+
+    cfg = _config(args)
+    rounds = [int(r) for r in args.rounds.split(",")]
+    summary = write(Path(args.scene_dir), rounds, cfg.max_rounds, Path(args.out))
+    print(json.dumps({k: summary[k] for k in ("photos_total", "stopped_because")}))
     return 0
 
 
@@ -132,10 +167,13 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--config", default="config.yaml", help="campaign config (YAML)")
         sp.add_argument("--params", help="stage parameters as JSON (used by the workflow)")
 
-    c = sub.add_parser("capture", help="round-0 capture: random exploration")
+    c = sub.add_parser(
+        "capture", help="capture: random exploration (round 0), goals of the last map (r >= 1)"
+    )
     with_config(c)
-    c.add_argument("--out", required=True, help="capture folder (round_000/capture)")
+    c.add_argument("--out", required=True, help="capture folder (round_XXX/capture)")
     c.add_argument("--round", type=int, default=0)
+    c.add_argument("--previous", help="rounds >= 1: the previous round's folder (round_XXX)")
     c.add_argument("--no-progress", action="store_true")
     c.set_defaults(func=cmd_capture)
 
@@ -162,6 +200,27 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--images", required=True, help="folder the model's image names live in")
     d.add_argument("--out", required=True, help="dense workspace (final/dense)")
     d.set_defaults(func=cmd_dense)
+
+    t = sub.add_parser("tour", help="virtual tour: ULR frames, tour.mp4, web viewer")
+    with_config(t)
+    t.add_argument("--sparse", required=True, help="COLMAP model folder (round_XXX/sfm)")
+    t.add_argument("--images", required=True, help="folder the model's image names live in")
+    t.add_argument("--dense", required=True, help="dense cloud (final/dense/fused.ply)")
+    t.add_argument("--freespace", help="free space of the map (round_XXX/freespace.npz)")
+    t.add_argument("--out", required=True, help="tour folder (final/tour)")
+    t.add_argument("--no-progress", action="store_true")
+    t.set_defaults(func=cmd_tour)
+
+    from scenebot.evaluate.cli import add_parsers
+
+    add_parsers(sub)  # observable, evaluate
+
+    cp = sub.add_parser("campaign", help="campaign.json: photos, registered, scores per round")
+    with_config(cp)
+    cp.add_argument("--scene-dir", required=True, help="results/<scene>")
+    cp.add_argument("--rounds", required=True, help="the rounds run, e.g. 0,1,2")
+    cp.add_argument("--out", required=True, help="results/<scene>/campaign.json")
+    cp.set_defaults(func=cmd_campaign)
 
     e = sub.add_parser(
         "nxt-emulator",

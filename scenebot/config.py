@@ -11,6 +11,7 @@ This module must stay light to import: the Snakefile loads it at every start.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any, Literal
 
@@ -18,11 +19,13 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from scenebot.dense.config import DenseConfig
+from scenebot.evaluate.config import EvaluateConfig
 from scenebot.localize.config import LocalizeConfig
 from scenebot.plan.config import PlanConfig
 from scenebot.robot.nxt.config import EmulatorConfig, NxtConfig
 from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
 from scenebot.sfm.config import SfmConfig
+from scenebot.tour.config import TourConfig
 
 SCHEMA_PATH = Path(__file__).with_name("config.schema.json")
 
@@ -42,7 +45,7 @@ class StartPose(_Model):
 class WorldConfig(_Model):
     """The simulated world: a built-in scene or a textured mesh file."""
 
-    builtin: Literal["office"] | None = Field(
+    builtin: Literal["office", "flat"] | None = Field(
         "office", description="Built-in scene generator; null when `file` is set."
     )
     file: Path | None = Field(
@@ -59,7 +62,7 @@ class WorldConfig(_Model):
     def _one_source(self) -> WorldConfig:
         if (self.builtin is None) == (self.file is None):
             raise ValueError(
-                "set exactly one of world.builtin (allowed: 'office') and world.file "
+                "set exactly one of world.builtin (allowed: 'office', 'flat') and world.file "
                 "(a path to an OBJ, PLY or GLB scene)"
             )
         return self
@@ -165,6 +168,108 @@ class ExplorationConfig(_Model):
         return self
 
 
+class FollowConfig(_Model):
+    """Settings of path following."""
+
+    node_reached_m: float = Field(
+        0.15, gt=0, description="Switch to the next path node within this distance (m)."
+    )
+    goal_reached_m: float = Field(
+        0.05, gt=0, description="The goal is reached within this distance (m) of a visual fix."
+    )
+    localize_every_m: float = Field(
+        0.5, gt=0, description="Longest drive (m) between visual localizations."
+    )
+    localize_after_turn_deg: float = Field(
+        20.0, ge=0, description="Localize after a turn larger than this (deg)."
+    )
+    min_turn_deg: float = Field(
+        2.0, ge=0, description="Heading errors below this (deg) are not corrected."
+    )
+    max_obstacles: int = Field(
+        5, ge=1, description="Give up on a goal at this many bumps/stalls (the paper's k)."
+    )
+    backup_m: float = Field(0.12, gt=0, description="Back up this far (m) after a bump/stall.")
+    sidestep_m: float = Field(
+        0.25,
+        ge=0,
+        description="Then drive this far (m) off the path, at 90 deg, before replanning.",
+    )
+    obstacle_radius_m: float = Field(
+        0.35,
+        ge=0,
+        description="A bump marks a disk of this radius (m) on the planner's grid as an "
+        "obstacle: the unseen object's likely extent plus the robot's radius.",
+    )
+    contact_distance_m: float = Field(
+        0.25, ge=0, description="Distance (m) ahead of the robot's axis where a bump is marked."
+    )
+    max_localize_retries: int = Field(
+        4, ge=0, description="Failed localizations at the goal before accepting odometry."
+    )
+    retry_turn_deg: float = Field(
+        40.0,
+        ge=0,
+        description="Before retrying a failed localization at the goal, turn in place to "
+        "headings +a, -a, +2a, -2a ... (deg) around the arrival heading (a different view); "
+        "0: back up retry_move_m instead.",
+    )
+    retry_move_m: float = Field(
+        0.08, gt=0, description="Back-up distance (m) before a retry when retry_turn_deg is 0."
+    )
+    max_motions: int = Field(
+        120, ge=1, description="Motion commands per goal at most (then the goal is abandoned)."
+    )
+    camera_forward_m: float = Field(
+        0.1,
+        description="Camera centre ahead of the robot's rotation axis (m); unset in a "
+        "campaign config: sim.camera.forward_offset_m (the camera mount).",
+    )
+    camera_left_m: float = Field(
+        0.0,
+        description="Camera centre left of the robot's rotation axis (m); unset in a "
+        "campaign config: sim.camera.lateral_offset_m.",
+    )
+    gate_m: float = Field(
+        0.5,
+        ge=0,
+        description="A fix farther than gate_m + gate_per_m * (distance driven since the last "
+        "fix) from the odometry prediction is rejected (repeated textures can give confident "
+        "wrong poses), unless the next fix agrees with it.",
+    )
+    gate_per_m: float = Field(0.25, ge=0, description="See gate_m (m per m driven).")
+    gate_deg: float = Field(
+        25.0, ge=0, description="A fix whose heading differs more (deg) from odometry is rejected."
+    )
+    turn_to_goal_heading: bool = Field(
+        True, description="At the goal, turn to the goal's heading when it has one."
+    )
+
+
+class AdaptiveConfig(_Model):
+    """Adaptive capture (rounds >= 1): drive to the goals of the previous round's map and take
+    the missing photos there."""
+
+    pattern: Literal["fan", "circle"] = Field(
+        "fan",
+        description="Photos at a goal: `fan`: the goal heading and fan_photos - 1 more, "
+        "fan_step_deg apart, centred on it; `circle`: circle_photos evenly around.",
+    )
+    fan_photos: int = Field(5, ge=1, description="Photos per goal with pattern `fan`.")
+    fan_step_deg: float = Field(
+        15.0, gt=0, le=90, description="Heading step between fan photos (deg)."
+    )
+    circle_photos: int = Field(12, ge=3, description="Photos per goal with pattern `circle`.")
+    max_photos: int = Field(
+        60, ge=1, description="Photo budget of one adaptive round (photos at goals)."
+    )
+    localize_photos: bool = Field(
+        True,
+        description="Localize every goal photo against the map and log the estimate (it "
+        "guides the next map's pair selection).",
+    )
+
+
 class PhotosConfig(_Model):
     """Bring-your-own photos (``robot: photos``)."""
 
@@ -190,6 +295,12 @@ class Config(_Model):
         ),
     )
     seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
+    max_rounds: int = Field(
+        3,
+        ge=1,
+        description="Capture rounds at most: round 0 (exploration) and max_rounds - 1 "
+        "adaptive rounds; the campaign stops earlier when a round's goals.json says complete.",
+    )
     world: WorldConfig = WorldConfig()
     sim: SimConfig = SimConfig()
     exploration: ExplorationConfig = ExplorationConfig()
@@ -202,13 +313,45 @@ class Config(_Model):
     goals: GoalsConfig = GoalsConfig()
     plan: PlanConfig = PlanConfig()
     localize: LocalizeConfig = LocalizeConfig()
+    follow: FollowConfig = FollowConfig()
+    adaptive: AdaptiveConfig = AdaptiveConfig()
     dense: DenseConfig = DenseConfig()
+    tour: TourConfig = TourConfig()
+    evaluate: EvaluateConfig = EvaluateConfig()
 
     @model_validator(mode="after")
     def _photos_folder(self) -> Config:
         if self.robot == "photos" and self.photos.folder is None:
             raise ValueError("robot: photos needs photos.folder (a folder of JPEG photos)")
         return self
+
+    @model_validator(mode="after")
+    def _camera_mount(self) -> Config:
+        """The camera mount is configured once (sim.camera); following and the map's scale
+        (sfm.camera_offset_m) use it unless set explicitly."""
+        cam, fol = self.sim.camera, self.follow
+        update = {}
+        if "camera_forward_m" not in fol.model_fields_set:
+            update["camera_forward_m"] = cam.forward_offset_m
+        if "camera_left_m" not in fol.model_fields_set:
+            update["camera_left_m"] = cam.lateral_offset_m
+        if update and any(getattr(fol, k) != v for k, v in update.items()):
+            object.__setattr__(self, "follow", FollowConfig(**{**fol.model_dump(), **update}))
+        # the map's metric scale comes from circles of photos around the rotation axis
+        offset = math.hypot(cam.forward_offset_m, cam.lateral_offset_m)
+        if (
+            self.robot != "photos"
+            and offset > 0
+            and "camera_offset_m" not in self.sfm.model_fields_set
+            and self.sfm.camera_offset_m != offset
+        ):
+            sfm = SfmConfig(**{**self.sfm.model_dump(), "camera_offset_m": offset})
+            object.__setattr__(self, "sfm", sfm)
+        return self
+
+    def camera_mount(self) -> tuple[float, float]:
+        """The camera centre (forward, left) of the robot's rotation axis (m)."""
+        return self.sim.camera.forward_offset_m, self.sim.camera.lateral_offset_m
 
 
 # ---------------------------------------------------------------------------- loading

@@ -25,89 +25,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
 from scenebot.capturelog import CaptureLog
+from scenebot.config import FollowConfig
 from scenebot.localize.locate import FailureReason, LocalizationFailure, PoseEstimate
 from scenebot.plan.path import PlanFailure, PlannedPath
 from scenebot.robot.base import Camera, MotionResult, MotionStatus, Pose2D, Robot, wrap_angle
-
-
-class FollowConfig(BaseModel):
-    """Settings of path following."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    node_reached_m: float = Field(
-        0.15, gt=0, description="Switch to the next path node within this distance (m)."
-    )
-    goal_reached_m: float = Field(
-        0.05, gt=0, description="The goal is reached within this distance (m) of a visual fix."
-    )
-    localize_every_m: float = Field(
-        0.5, gt=0, description="Longest drive (m) between visual localizations."
-    )
-    localize_after_turn_deg: float = Field(
-        20.0, ge=0, description="Localize after a turn larger than this (deg)."
-    )
-    min_turn_deg: float = Field(
-        2.0, ge=0, description="Heading errors below this (deg) are not corrected."
-    )
-    max_obstacles: int = Field(
-        5, ge=1, description="Give up on a goal at this many bumps/stalls (the paper's k)."
-    )
-    backup_m: float = Field(0.12, gt=0, description="Back up this far (m) after a bump/stall.")
-    sidestep_m: float = Field(
-        0.25,
-        ge=0,
-        description="Then drive this far (m) off the path, at 90 deg, before replanning.",
-    )
-    obstacle_radius_m: float = Field(
-        0.35,
-        ge=0,
-        description="A bump marks a disk of this radius (m) on the planner's grid as an "
-        "obstacle: the unseen object's likely extent plus the robot's radius.",
-    )
-    contact_distance_m: float = Field(
-        0.25, ge=0, description="Distance (m) ahead of the robot's axis where a bump is marked."
-    )
-    max_localize_retries: int = Field(
-        4, ge=0, description="Failed localizations at the goal before accepting odometry."
-    )
-    retry_turn_deg: float = Field(
-        40.0,
-        ge=0,
-        description="Before retrying a failed localization at the goal, turn in place to "
-        "headings +a, -a, +2a, -2a ... (deg) around the arrival heading (a different view); "
-        "0: back up retry_move_m instead.",
-    )
-    retry_move_m: float = Field(
-        0.08, gt=0, description="Back-up distance (m) before a retry when retry_turn_deg is 0."
-    )
-    max_motions: int = Field(
-        120, ge=1, description="Motion commands per goal at most (then the goal is abandoned)."
-    )
-    camera_forward_m: float = Field(
-        0.1, description="Camera centre ahead of the robot's rotation axis (m)."
-    )
-    camera_left_m: float = Field(
-        0.0, description="Camera centre left of the robot's rotation axis (m)."
-    )
-    gate_m: float = Field(
-        0.5,
-        ge=0,
-        description="A fix farther than gate_m + gate_per_m * (distance driven since the last "
-        "fix) from the odometry prediction is rejected (repeated textures can give confident "
-        "wrong poses), unless the next fix agrees with it.",
-    )
-    gate_per_m: float = Field(0.25, ge=0, description="See gate_m (m per m driven).")
-    gate_deg: float = Field(
-        25.0, ge=0, description="A fix whose heading differs more (deg) from odometry is rejected."
-    )
-    turn_to_goal_heading: bool = Field(
-        True, description="At the goal, turn to the goal's heading when it has one."
-    )
-
 
 Localizer = Callable[[Path], PoseEstimate | LocalizationFailure]
 Planner = Callable[[np.ndarray, np.ndarray], PlannedPath | PlanFailure]
@@ -208,6 +131,8 @@ class PathFollower:
         truth: simulator only: returns the true pose record for the log (never used to
             decide anything).
         initial_pose: map pose to assume until the first successful fix.
+        trust_initial: gate the first fix against ``initial_pose`` (False: accept any first
+            fix, e.g. when the robot may have moved since ``initial_pose`` was known).
     """
 
     def __init__(
@@ -221,6 +146,7 @@ class PathFollower:
         log: CaptureLog | None = None,
         truth: Callable[[], dict] | None = None,
         initial_pose: Pose2D | None = None,
+        trust_initial: bool = True,
     ):
         self.robot = robot
         self.camera = camera
@@ -233,7 +159,7 @@ class PathFollower:
         odo = robot.sense().odometry
         self._fix = initial_pose or odo
         self._odo_at_fix = odo
-        self._since_fix_m = math.inf if initial_pose is None else 0.0
+        self._since_fix_m = 0.0 if initial_pose is not None and trust_initial else math.inf
         self._photo_count = 0
         self._rejected: tuple[Pose2D, Pose2D] | None = None  # (fix, odometry) last rejected
         self._goal_index = 0
@@ -268,6 +194,15 @@ class PathFollower:
         self._photo_count += 1
         odo = self.robot.sense().odometry
         path = self.camera.capture(dest)
+        return self.localize_photo(path, odo)
+
+    def localize_photo(self, path: Path, odo: Pose2D) -> PoseEstimate | LocalizationFailure:
+        """Localize a photo taken at odometry ``odo``; a consistent fix becomes the new fix.
+
+        Args:
+            path: the photo.
+            odo: the odometry reading when it was taken.
+        """
         est = self.localizer(path)
         res = self._result
         if est.ok:

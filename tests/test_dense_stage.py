@@ -97,8 +97,13 @@ def test_view_without_overlap(tmp_path):
     headings = np.array([0.0, 0.0, np.pi])  # the third looks backwards
     make_dataset(tmp_path / "cap", sc, centers, headings, 128, 96, num_points=2000)
     inputs = stage.DenseInputs(tmp_path / "cap" / "sparse", tmp_path / "cap" / "images")
+    strict = _cfg(skip_isolated_views=False)
     with pytest.raises(ValueError, match=r"share no usable overlap.*view_002.jpg"):
-        stage.run(_cfg(), inputs, stage.DenseOutputs(tmp_path / "dense"))
+        stage.run(strict, inputs, stage.DenseOutputs(tmp_path / "strict"))
+    # the default leaves it out with a warning naming it, and fuses the others
+    summary = stage.run(_cfg(), inputs, stage.DenseOutputs(tmp_path / "dense"))
+    assert (tmp_path / "dense" / "fused.ply").stat().st_size > 0
+    assert "view_002.jpg" in json.dumps(summary)
 
 
 def test_colmap_cuda_backend_requires_cuda():

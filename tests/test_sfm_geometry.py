@@ -10,7 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from scenebot.sfm.align import fit_plane_normal, fit_robot_frame
+from scenebot.sfm.align import (
+    fit_plane_normal,
+    fit_robot_frame,
+    fit_scale_to_circles,
+    turn_in_place_circles,
+)
 from scenebot.sfm.evaluate import evaluate_accuracy, umeyama
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.photos import Photo
@@ -22,8 +27,13 @@ def _random_rotation(rng: np.random.Generator) -> np.ndarray:
     return pycolmap.Rotation3d(q).matrix()
 
 
-def _robot_trajectory(rng, n_spots=4, per_circle=12, offset=(0.1, 0.02), compass_off=0.7):
+def _robot_trajectory(
+    rng, n_spots=4, per_circle=12, offset=(0.1, 0.02), compass_off=0.7, drive_slip=0.0
+):
     """Robot-frame cameras of circles of photos; noisy odometry; compass with an offset.
+
+    ``drive_slip``: the wheels slip by this fraction when driving, so odometry over-reads
+    the drive distances by ``1 / (1 - drive_slip)``.
 
     Returns photos, and the true camera centres C (N, 3), up U, viewing V in the robot frame.
     """
@@ -58,7 +68,12 @@ def _robot_trajectory(rng, n_spots=4, per_circle=12, offset=(0.1, 0.02), compass
         theta += rng.uniform(-1, 1)
         odo[2] += rng.uniform(-1, 1) * 0.9
         pos = pos + d * np.array([math.cos(theta), math.sin(theta)])
-        odo[:2] += d * (1 + rng.normal(0, 0.01)) * np.array([math.cos(odo[2]), math.sin(odo[2])])
+        odo[:2] += (
+            d
+            / (1 - drive_slip)
+            * (1 + rng.normal(0, 0.01))
+            * np.array([math.cos(odo[2]), math.sin(odo[2])])
+        )
     return photos, np.array(C), np.array(U), np.array(V)
 
 
@@ -88,6 +103,68 @@ def test_fit_robot_frame_recovers_scale_heading_and_plane(seed):
     assert np.allclose(al.camera_offset_m, (0.1, 0.02), atol=0.01)
     # origin: the robot's first position (odometry 0, 0) up to the compass-fit yaw error
     assert np.linalg.norm(Cr[0, :2] - C[0, :2]) < 0.02
+
+
+def _sfm_frame(rng, C, U, V, noise_m=0.002):
+    """The cameras in an arbitrary SfM frame ``x_sfm = R0^T (x - t0) / s0`` with noise."""
+    s0, R0, t0 = rng.uniform(0.2, 5.0), _random_rotation(rng), rng.normal(size=3)
+    Cs = (C - t0) @ R0 / s0 + rng.normal(0, noise_m / s0, C.shape)
+    return s0, Cs, U @ R0, V @ R0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lever_arm_scale_is_immune_to_drive_slip(seed):
+    """Odometry over-reads drives by 6 %: the lever-arm scale stays within 1 %, the
+    odometry scale is reported as the cross-check and is off by about the slip."""
+    rng = np.random.default_rng(seed)
+    offset = (0.1, 0.02)
+    photos, C, U, V = _robot_trajectory(rng, per_circle=18, offset=offset, drive_slip=0.06)
+    s0, Cs, Us, Vs = _sfm_frame(rng, C, U, V)
+    radius = math.hypot(*offset)
+    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=radius)
+    assert al.scale_source == "camera_lever_arm"
+    assert al.scale == pytest.approx(s0, rel=0.01)
+    assert np.allclose(al.camera_offset_m, offset, atol=0.003)
+    assert al.stats["circles_used"] == 4
+    assert al.stats["scale_odometry"] == pytest.approx(s0 / 0.94, rel=0.02)
+    assert al.stats["scale_odometry_vs_circles"] == pytest.approx(1 / 0.94 - 1, abs=0.02)
+    plain = fit_robot_frame(photos, Cs, Us, Vs)  # without the lever arm: biased by the slip
+    assert plain.scale_source == "odometry"
+    assert abs(plain.scale / s0 - 1) > 0.04
+    Cr = al.scale * Cs @ al.R.T + al.t
+    assert np.linalg.norm(Cr[0, :2] - C[0, :2]) < 0.02
+
+
+def test_lever_arm_scale_falls_back_to_odometry_without_usable_circles():
+    rng = np.random.default_rng(5)
+    photos, C, U, V = _robot_trajectory(rng, per_circle=6)  # 6 photos per circle < 8
+    s0, Cs, Us, Vs = _sfm_frame(rng, C, U, V)
+    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=0.102, min_circle_photos=8)
+    assert al.scale_source == "odometry"
+    assert al.stats["scale_circles"] is None
+    assert all(not c["used"] and "fewer than 8" in c["rejected"] for c in al.stats["circles"])
+    assert al.scale == pytest.approx(s0, rel=0.03)
+
+
+def test_turn_in_place_circles_and_outlier_circle_rejection():
+    rng = np.random.default_rng(7)
+    photos, C, _, V = _robot_trajectory(rng, n_spots=5, per_circle=12, offset=(0.1, 0.0))
+    circles = turn_in_place_circles(photos)
+    assert [len(c) for c in circles] == [12] * 5
+    assert all(photos[c[0]].index == 12 * k for k, c in enumerate(circles))
+    h = np.arctan2(V[:, 1], V[:, 0])
+    xy = C[:, :2] * 2.0  # 2 units per metre
+    bad = np.array(circles[2])
+    axis = xy[bad].mean(0)
+    xy[bad] = axis + 1.3 * (xy[bad] - axis)  # one circle 30 % too large (a broken part)
+    scale, u, stats = fit_scale_to_circles(xy, h, circles, 0.1)
+    assert scale == pytest.approx(0.5, rel=1e-6)
+    assert np.allclose(u, (0.2, 0.0), atol=1e-9)
+    assert [c["used"] for c in stats["circles"]] == [True, True, False, True, True]
+    assert "disagrees" in stats["circles"][2]["rejected"]
+    # a short arc (3 photos over 60 deg) cannot separate the axis from the lever arm
+    _, _, stats2 = fit_scale_to_circles(xy, h, [circles[0][:3]], 0.1, min_photos=3)
+    assert "span" in stats2["circles"][0]["rejected"]
 
 
 def test_plane_normal_sign_follows_camera_up():

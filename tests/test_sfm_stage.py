@@ -118,6 +118,68 @@ def test_rerun_reuses_features_and_matches(round0):
     assert report["registered"] == 36
 
 
+def test_lever_arm_scale_and_circle_priors(round0):
+    """With the camera's known lever arm, scale comes from the circles of photos turned in
+    place (odometry reported as the cross-check) and the circle priors keep the accuracy."""
+    base, cap, _, _, _ = round0
+    cfg = SfmConfig(exhaustive_max_images=10, plots=False, camera_offset_m=0.10)
+    out = SfmOutputs(base / "lever_arm")
+    report = run(cfg, SfmInputs(base / "sfm_db" / "database.db", [cap]), out)
+    assert report["registered"] == 36
+    sc = report["scale"]
+    assert sc["source"] == "camera_lever_arm" and sc["circles_used"] == 3
+    assert sc["from_odometry"] is not None and abs(sc["odometry_vs_lever_arm"]) < 0.1
+    assert report["focal_fixed"] and report["cameras"][0]["params"][0] == pytest.approx(260.0)
+    circ = report["circle_priors"]
+    assert circ["circles"] == 3 and circ["moved"] == {}
+    assert circ["residual_median_after_m"] < 0.003  # on circles of the 10 cm lever arm
+    acc = json.loads(out.accuracy.read_text())
+    assert acc["metric_scale_error"] < 0.01
+    assert acc["position_error_m"]["median"] < 0.01
+    assert acc["heading_error_deg"]["median"] < 0.5
+    off = report["alignment"]["camera_offset_m"]
+    assert math.hypot(*off) == pytest.approx(0.10, rel=1e-6)
+
+
+def test_photos_off_their_circle_are_moved_back(round0):
+    """A run of 3 photos of one circle displaced by 15 cm (a misregistration) goes back onto
+    its circle; the rest stays put."""
+    from scenebot.sfm.circles import repair_circles
+    from scenebot.sfm.mapping import mapping_options
+    from scenebot.sfm.photos import photos_from_captures
+
+    base, cap, out0, _, _ = round0
+    rec = pycolmap.Reconstruction(str(out0.model_dir))  # metric robot frame
+    root, photos = photos_from_captures([cap])
+    by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
+    before = {n: rec.image(i).projection_center() for n, i in by_name.items()}
+    moved = [p.name for p in photos[14:17]]  # second circle
+    for n in moved:
+        im = rec.image(by_name[n])
+        rot = im.cam_from_world().rotation
+        c = im.projection_center() + np.array([0.15, -0.05, 0.0])
+        rec.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(rot, -rot.matrix() @ c)
+    cfg = SfmConfig()
+    rec2, stats = repair_circles(
+        rec,
+        photos,
+        (0.10, 0.0),
+        base / "sfm_db" / "database.db",
+        root,
+        base / "repair_work",
+        triangulation_options=mapping_options(cfg, [p.name for p in photos], fix_focal=True),
+        num_threads=1,
+    )
+    assert sorted(stats["moved"]) == sorted(moved)
+    assert all(0.14 < d < 0.17 for d in stats["moved"].values())
+    assert stats["residual_max_m"] < 0.01
+    after = {rec2.image(i).name: rec2.image(i).projection_center() for i in rec2.reg_image_ids()}
+    for n in moved:
+        assert np.linalg.norm(after[n] - before[n]) < 0.01
+    others = [np.linalg.norm(after[n] - before[n]) for n in before if n not in moved]
+    assert np.median(others) < 0.005
+
+
 @pytest.mark.slow
 def test_round_update_is_incremental_and_accurate(round0, room):
     base, cap0, out0, _, _ = round0

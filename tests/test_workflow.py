@@ -106,13 +106,19 @@ CANNED = ROOT / "tests" / "data" / "canned" / "round_000" / "capture"
 @pytest.mark.slow
 @pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
 def test_every_stage_runs_on_the_canned_photo_set(workdir):
-    """The committed 320x240 office photos through every stage that exists."""
+    """The committed 320x240 office photos through every stage: round 0's map and decisions,
+    an adaptive round in the simulator, the campaign summary and the dense model; then a
+    changed decision stage rebuilds the maps but never re-takes a finished round's photos."""
     cfg = dict(
         SMALL,
+        max_rounds=2,
         sim={"camera": {"width": 320, "height": 240}},
         sfm={"peak_threshold": 0.002},
         score={"n_candidates": 300},
+        goals={"k": 3},
+        adaptive={"fan_photos": 3},
         dense={"max_image_size": 320},
+        tour={"width": 160, "height": 120, "eval_holdout": 4, "path": {"frames": 24}},
     )
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     capture = workdir / "results/office/round_000/capture"
@@ -128,15 +134,52 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
     res = snakemake(workdir)
     assert res.returncode == 0, res.stderr[-4000:]
     assert not (capture / "superseded").exists()  # the given photos were not re-taken
-    r0 = workdir / "results/office/round_000"
+    results = workdir / "results/office"
+    r0 = results / "round_000"
     products = "sfm/images.bin sfm/point_descriptors.npz sfm/map.png mesh.ply freespace.png"
     products += " candidates.csv goals.json paths.json navgrid.png"
     for name in products.split():
         assert (r0 / name).stat().st_size > 0, name
     goals = json.loads((r0 / "goals.json").read_text())
     assert "complete" in goals and goals["goals"]
-    assert (workdir / "results/office/final/dense/fused.ply").stat().st_size > 1000
+    campaign = json.loads((results / "campaign.json").read_text())
+    rounds = [r["round"] for r in campaign["rounds"]]
+    assert rounds == ([0] if goals["complete"] else [0, 1])
+    if rounds == [0, 1]:
+        r1 = results / "round_001"
+        events = [json.loads(x) for x in (r1 / "capture/log.jsonl").read_text().splitlines()]
+        outcomes = [e for e in events if str(e.get("event", "")).startswith("goal_")]
+        assert len(outcomes) == len(goals["goals"])  # every goal reached, abandoned or skipped
+        assert all(e.get("reason") for e in outcomes)
+        assert (r1 / "capture/trajectory.png").stat().st_size > 0
+        assert (r1 / "sfm/report.json").exists() and (r1 / "paths.json").exists()
+        assert campaign["rounds"][1]["photos"] == len(list((r1 / "capture/images").glob("*")))
+    assert (results / "campaign.png").stat().st_size > 0
+    assert (results / "final/dense/fused.ply").stat().st_size > 1000
+    tour = results / "final/tour"
+    assert (tour / "index.html").is_file() and (tour / "tour.mp4").stat().st_size > 1000
+    summary = json.loads((tour / "tour_summary.json").read_text())
+    frames = len(list((tour / "frames").glob("*.jpg")))
+    assert frames == summary["frames"] >= 12  # frames seeing too little are dropped, said so
+    assert frames + summary["path_dropped_frames"] == 24
+    final = json.loads((results / "final/evaluation.json").read_text())
+    assert final  # the truth-based figures of the campaign
+    for r in rounds:
+        assert (results / f"round_{r:03d}/evaluation.json").is_file()
+    assert (results / "eval/observable_surface.png").is_file()
     assert snakemake(workdir, "-n").stdout.count("Nothing to be done") == 1
+
+    # a decision stage changes: maps and decisions are rebuilt, photos are kept
+    photos = {p: p.stat().st_mtime_ns for p in results.glob("round_*/capture/images/*.jpg")}
+    (workdir / "config.yaml").write_text(yaml.safe_dump(dict(cfg, score={"n_candidates": 250})))
+    again = snakemake(workdir)
+    assert again.returncode == 0, again.stderr[-4000:]
+    assert "rule score" in again.stdout + again.stderr
+    assert "capture" not in "".join(
+        line for line in (again.stdout + again.stderr).splitlines() if line.startswith("rule ")
+    )
+    assert {p: p.stat().st_mtime_ns for p in photos} == photos
+    assert not list(results.glob("round_*/capture/superseded"))
 
 
 @pytest.mark.slow

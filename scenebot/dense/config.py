@@ -87,9 +87,10 @@ class DenseConfig(BaseModel):
         1.0, ge=0, description="Minimum median triangulation angle to a source view, degrees."
     )
     skip_isolated_views: bool = Field(
-        False,
-        description="Leave out (with a warning) views that share no usable overlap with any "
-        "other view instead of failing.",
+        True,
+        description="Leave out (with a warning naming them) views that share no usable overlap "
+        "with any other view; false: fail instead. A campaign's goal photos can look at what "
+        "little else saw, so leaving them out is the default.",
     )
     max_views: int = Field(
         0, ge=0, description="Reference views for which depth is computed (0 = all registered)."

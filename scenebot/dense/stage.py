@@ -253,7 +253,7 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
             f" sparse points at >= {cfg.min_triangulation_angle_deg} deg) with any other view: "
             + ", ".join(isolated[:10])
             + (" ..." if len(isolated) > 10 else "")
-            + "; set dense.skip_isolated_views: true to leave them out, or lower "
+            + "; set dense.skip_isolated_views: true (the default) to leave them out, or lower "
             "dense.min_shared_points / dense.min_triangulation_angle_deg"
         )
     for name in isolated:

@@ -58,4 +58,10 @@ class PlanConfig(BaseModel):
         description="Path simplification may replace a run of moves by one straight move when "
         "its cost is at most this multiple of the original moves' cost.",
     )
+    goal_snap_m: float = Field(
+        0.3,
+        ge=0,
+        description="A goal whose robot position falls in an obstacle cell moves to the "
+        "nearest free cell within this distance (m), keeping its heading; farther: skipped.",
+    )
     plot: bool = Field(True, description="Write the Fig. 4-like picture round_{r}/navgrid.png.")

@@ -116,6 +116,35 @@ def robot_xy_for_camera(
     return np.asarray(camera_xy, float) - np.array([fwd * c - left * s, fwd * s + left * c])
 
 
+def snap_to_free(grid: NavGrid, xy: np.ndarray, radius_m: float) -> np.ndarray | None:
+    """``xy`` if its cell is free, else the centre of the nearest free cell within
+    ``radius_m`` (m), else ``None`` (also when ``xy`` lies outside the grid).
+
+    Args:
+        grid: the navigation grid.
+        xy: (2,) position (m, map frame).
+        radius_m: how far the position may move.
+    """
+    geo = grid.geometry
+    cell = geo.cell_of(xy)
+    if not geo.contains_cell(cell):
+        return None
+    if not grid.lethal[cell[0], cell[1]]:
+        return np.asarray(xy, float)
+    k = int(np.ceil(radius_m / geo.cell_m))
+    ny, nx = geo.shape
+    r0, r1 = max(cell[0] - k, 0), min(cell[0] + k + 1, ny)
+    c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, nx)
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    free = ~grid.lethal[r0:r1, c0:c1]
+    if not free.any():
+        return None
+    centres = geo.centre_of(np.stack([rr[free], cc[free]], axis=-1))
+    d = np.hypot(centres[:, 0] - xy[0], centres[:, 1] - xy[1])
+    j = int(np.argmin(d))
+    return centres[j] if d[j] <= radius_m else None
+
+
 def plan_all(
     grid: NavGrid,
     start_xy: np.ndarray,
@@ -135,12 +164,18 @@ def plan_all(
         gxy = np.array([float(goal["x"]), float(goal["y"])])
         if goal.get("theta") is not None:
             gxy = robot_xy_for_camera(gxy, float(goal["theta"]), camera_offset_m)
+        snapped = snap_to_free(grid, gxy, cfg.goal_snap_m)
+        extra = {}
+        if snapped is not None and not np.allclose(snapped, gxy):
+            extra = {"snapped_from": gxy.tolist(), "snap_m": float(np.hypot(*(snapped - gxy)))}
+            gxy = snapped
         res = plan_path(grid, here, gxy, cfg.simplify_factor)
         rec = {
             "goal_index": i,
             "goal": goal,
             "robot_goal": gxy.tolist(),
             "from": here.tolist(),
+            **extra,
             **res.as_dict(),
         }
         out.append(rec)

@@ -6,6 +6,7 @@ come from the file's materials; a material without a texture renders in its flat
 
 from __future__ import annotations
 
+import importlib
 import re
 from pathlib import Path
 
@@ -166,15 +167,22 @@ def load_scene_file(path: Path | str, floor_z: float | None = None) -> SceneMesh
     )
 
 
+# Built-in scene generators: name -> (module, function of the seed).
+BUILTIN_SCENES = {
+    "office": ("scenebot.scene.office", "office"),
+    "flat": ("scenebot.scene.flat", "flat"),
+}
+
+
 def load_world_scene(world_cfg) -> SceneMesh:
     """The scene a :class:`~scenebot.config.WorldConfig` names."""
     if world_cfg.file is not None:
         return load_scene_file(world_cfg.file, world_cfg.floor_z)
-    if world_cfg.builtin == "office":
-        from scenebot.scene.office import office
-
-        scene = office(world_cfg.seed)
+    if world_cfg.builtin in BUILTIN_SCENES:
+        module, func = BUILTIN_SCENES[world_cfg.builtin]
+        scene = getattr(importlib.import_module(module), func)(world_cfg.seed)
         if world_cfg.floor_z is not None:
             scene.floor_z = world_cfg.floor_z
         return scene
-    raise SceneLoadError(f"unknown built-in scene {world_cfg.builtin!r}; allowed: 'office'")
+    allowed = ", ".join(repr(k) for k in BUILTIN_SCENES)
+    raise SceneLoadError(f"unknown built-in scene {world_cfg.builtin!r}; allowed: {allowed}")

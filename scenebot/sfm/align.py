@@ -9,10 +9,15 @@ its first photo (minus the camera offset), x axis along compass heading 0, z up.
    is chosen so that it agrees with the cameras' up vectors (-y axis of OpenCV cameras).
 2. **Heading**: the yaw that best maps the cameras' viewing directions onto the compass
    headings (robust circular mean), with ``camera_yaw_deg`` for a camera not looking forward.
-3. **Scale**: the camera's offset from the robot's rotation axis from photo pairs of turns
-   in place, then a robust fit of odometry drive distances to the SfM robot displacements
-   (lengths only, so heading drift of odometry from slip on turns does not bias it); see
-   :func:`fit_scale_to_odometry`.
+3. **Scale**: with the camera's known lever arm (``camera_offset_m``, the camera centre's
+   distance from the rotation axis), from the circles of photos turned in place: their
+   camera centres lie on circles of that radius whatever the wheels slip
+   (:func:`fit_scale_to_circles`). Otherwise (and always as a cross-check, in the stats)
+   from odometry: the camera's offset from photo pairs of turns in place, then a robust fit
+   of odometry drive distances to the SfM robot displacements (lengths only, so heading
+   drift of odometry from slip on turns does not bias it); see
+   :func:`fit_scale_to_odometry`. Drive distances carry the wheels' drive slip (2 % in
+   the simulator) and rest on few drive legs.
 4. **Translation**: z so that the centres' median height is 0; x, y from the previous
    round's model (median over shared photos) or from round 0's first photo's odometry.
 
@@ -42,10 +47,11 @@ class Alignment:
         scale: metres per SfM unit.
         R: (3, 3) rotation.
         t: (3,) translation (m).
-        scale_source: ``odometry``, ``known_distance``, ``previous_model`` or ``none``.
+        scale_source: ``camera_lever_arm``, ``odometry``, ``known_distance``,
+            ``previous_model`` or ``none``.
         heading_source: ``compass``, ``odometry``, ``previous_model`` or ``first_photo``.
         camera_offset_m: camera centre in the robot's frame (forward, left) (m) from the
-            odometry fit, or ``None``.
+            lever-arm or odometry fit, or ``None``.
         stats: fit residuals (plane rms (m), heading residual (deg), odometry residual (m), counts).
     """
 
@@ -194,6 +200,176 @@ def fit_scale_to_odometry(
     return scale, scale * o_unit, stats
 
 
+def _heading_span(h: np.ndarray) -> float:
+    """Angular span (rad) covered by headings ``h`` (rad): 2 pi minus the largest gap."""
+    a = np.sort(np.mod(h, 2 * np.pi))
+    if len(a) < 2:
+        return 0.0
+    gaps = np.diff(np.r_[a, a[0] + 2 * np.pi])
+    return float(2 * np.pi - gaps.max())
+
+
+def _fit_circles_lever_arm(
+    xy: np.ndarray, h: np.ndarray, groups: list[np.ndarray], iterations: int = 10
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint robust fit of ``xy[k] = p[c] + R(h[k]) @ u`` over the photos of circles ``c``.
+
+    Args:
+        xy: (N, 2) camera centres (any units, heading-aligned horizontal frame).
+        h: (N,) robot headings (rad).
+        groups: index arrays, one per circle (>= 3 photos each).
+        iterations: IRLS iterations: the first half Huber, the rest drop photos beyond 3
+            robust sigma (misregistered runs of a circle must not bend the lever arm).
+
+    Returns:
+        ``u`` (2,) the camera's lever arm in the robot frame (units of ``xy``), ``p``
+        (n_circles, 2) the rotation axes, ``r`` (N,) residual lengths (NaN off circles).
+    """
+    idx = np.concatenate(groups)
+    nc = len(groups)
+    A = np.zeros((2 * len(idx), 2 * nc + 2))
+    row = 0
+    for c, g in enumerate(groups):
+        for k in g:
+            ch, sh = math.cos(h[k]), math.sin(h[k])
+            A[row, 2 * c] = 1.0
+            A[row + 1, 2 * c + 1] = 1.0
+            A[row, -2:] = (ch, -sh)
+            A[row + 1, -2:] = (sh, ch)
+            row += 2
+    b = xy[idx].reshape(-1)
+    w = np.ones(len(idx))
+    x = np.zeros(2 * nc + 2)
+    for it in range(iterations):
+        ww = np.repeat(np.sqrt(w), 2)
+        x, *_ = np.linalg.lstsq(A * ww[:, None], b * ww, rcond=None)
+        r = np.linalg.norm((A @ x - b).reshape(-1, 2), axis=1)
+        sigma = max(1.4826 * float(np.median(r)), 1e-12)
+        if it < iterations // 2:  # Huber first (convex), then reject beyond 3 sigma
+            w = np.minimum(1.0, 1.5 * sigma / np.maximum(r, 1e-15))
+        else:
+            w = (r <= 3.0 * sigma).astype(float)
+    res = np.full(len(xy), np.nan)
+    res[idx] = r
+    return x[-2:], x[:-2].reshape(nc, 2), res
+
+
+def turn_in_place_circles(ph: list[Photo]) -> list[list[int]]:
+    """Runs of consecutive photos (same round, by capture index) between which the robot's
+    odometry position moved less than 1 cm: the robot turned in place, so the camera centres
+    lie on a circle about one rotation axis.
+
+    Args:
+        ph: photos, (N,).
+
+    Returns:
+        Index lists into ``ph`` (>= 2 photos each), in capture order.
+    """
+    by_round: dict[int, list[int]] = {}
+    for k, p in enumerate(ph):
+        if p.odometry is not None:
+            by_round.setdefault(p.round, []).append(k)
+    runs: list[list[int]] = []
+    for members in by_round.values():
+        members.sort(key=lambda k: ph[k].index)
+        cur = [members[0]]
+        for a, b in itertools.pairwise(members):
+            step = np.subtract(ph[b].odometry[:2], ph[a].odometry[:2])
+            if np.linalg.norm(step) < 0.01:
+                cur.append(b)
+            else:
+                if len(cur) >= 2:
+                    runs.append(cur)
+                cur = [b]
+        if len(cur) >= 2:
+            runs.append(cur)
+    return runs
+
+
+def fit_scale_to_circles(
+    xy: np.ndarray,
+    h: np.ndarray,
+    circles: list[list[int]],
+    camera_offset_m: float,
+    *,
+    min_photos: int = 8,
+    min_span_deg: float = 90.0,
+    max_spread: float = 0.03,
+) -> tuple[float | None, np.ndarray, dict]:
+    """Metric scale from the camera's known lever arm about the rotation axis.
+
+    A robot turning in place moves its camera, mounted ``camera_offset_m`` from the rotation
+    axis, on a circle of that radius, whatever the wheels slip. Per circle the model
+    ``xy[k] = p + R(h[k]) @ u`` (axis ``p``, lever arm ``u`` in the robot frame, SfM units)
+    is linear in ``p`` and ``u`` given the SfM headings; all usable circles share ``u``
+    (one camera mount) and are fitted jointly (Huber IRLS), and the scale is
+    ``camera_offset_m / |u|``. Circles with fewer than ``min_photos`` photos or spanning
+    less than ``min_span_deg`` of heading are not used (the axis and the lever arm are not
+    separable on a short arc). With three or more circles, circles whose own radius lies
+    beyond ``max(3 robust sigma, max_spread)`` (relative) of the median are rejected.
+
+    Args:
+        xy: (N, 2) camera centres in a heading-aligned horizontal frame (SfM units).
+        h: (N,) robot headings (rad) from the model's camera orientations.
+        circles: index lists into ``xy`` of turn-in-place runs (:func:`turn_in_place_circles`).
+        camera_offset_m: distance of the camera centre from the rotation axis (m).
+        min_photos: fewest photos for a circle to be used.
+        min_span_deg: smallest heading span (deg) for a circle to be used.
+        max_spread: relative radius deviation always tolerated between circles.
+
+    Returns:
+        ``scale`` (m per unit, ``None`` when no circle is usable), the lever arm ``u``
+        (2,) in SfM units, and stats (per circle: photos, span, radius, scale, used).
+    """
+    info: list[dict] = []
+    usable: list[np.ndarray] = []
+    for g in circles:
+        g = np.asarray(g)
+        span = math.degrees(_heading_span(h[g]))
+        d = {"photos": len(g), "span_deg": round(span, 1), "used": False}
+        if len(g) < min_photos:
+            d["rejected"] = f"fewer than {min_photos} photos"
+        elif span < min_span_deg:
+            d["rejected"] = f"heading span < {min_span_deg:g} deg"
+        else:
+            u_c, _, r_c = _fit_circles_lever_arm(xy, h, [g])
+            d["radius_units"] = float(np.linalg.norm(u_c))
+            d["residual_median_units"] = float(np.nanmedian(r_c))
+            usable.append(g)
+        info.append(d)
+    stats: dict = {"circles": info}
+    if not usable:
+        return None, np.zeros(2), stats
+    use = [d for d in info if "radius_units" in d]
+    radii = np.array([d["radius_units"] for d in use])
+    keep = np.ones(len(use), bool)
+    if len(use) >= 3:
+        med = float(np.median(radii))
+        sigma = 1.4826 * float(np.median(np.abs(radii - med)))
+        keep = np.abs(radii - med) <= max(3 * sigma, max_spread * med)
+        for d, k in zip(use, keep, strict=True):
+            if not k:
+                d["rejected"] = "radius disagrees with the other circles"
+    groups = [g for g, k in zip(usable, keep, strict=True) if k]
+    u, _, r = _fit_circles_lever_arm(xy, h, groups)
+    radius = float(np.linalg.norm(u))
+    if not radius > 0:
+        return None, u, stats
+    scale = camera_offset_m / radius
+    for d, k in zip(use, keep, strict=True):
+        d["used"] = bool(k)
+        d["scale"] = camera_offset_m / d["radius_units"]
+    stats.update(
+        {
+            "circles_used": len(groups),
+            "circle_photos_used": int(sum(len(g) for g in groups)),
+            "circle_residual_median_m": float(np.nanmedian(r)) * scale,
+            "circle_scales_spread": float(np.ptp([d["scale"] for d in use if d["used"]])) / scale,
+        }
+    )
+    return scale, u, stats
+
+
 def _camera_geometry(rec: pycolmap.Reconstruction, names: list[str]):
     by_name = {rec.image(i).name: rec.image(i) for i in rec.reg_image_ids()}
     C, U, V = [], [], []
@@ -215,6 +391,8 @@ def robot_frame_transform(
     min_odometry_pairs: int = 5,
     known_distance: tuple[str, str, float] | None = None,
     previous: pycolmap.Reconstruction | None = None,
+    camera_offset_m: float | None = None,
+    min_circle_photos: int = 8,
 ) -> Alignment:
     """The similarity from the model's frame to the robot frame (see module docstring).
 
@@ -227,6 +405,10 @@ def robot_frame_transform(
         known_distance: ``(name_a, name_b, metres)`` for photo sets without odometry.
         previous: round r-1's aligned model: x, y anchored to its shared photos (and scale
             taken from it when this set has too little odometry).
+        camera_offset_m: the camera centre's known distance (m) from the robot's rotation
+            axis: metric scale from circles of photos turned in place
+            (:func:`fit_scale_to_circles`), odometry as fallback and cross-check.
+        min_circle_photos: fewest photos of a turn-in-place circle used for the scale.
 
     Returns:
         The alignment.
@@ -252,6 +434,8 @@ def robot_frame_transform(
         min_odometry_pairs=min_odometry_pairs,
         known_distance=known_distance,
         previous_centers=prev_c,
+        camera_offset_m=camera_offset_m,
+        min_circle_photos=min_circle_photos,
     )
 
 
@@ -266,6 +450,8 @@ def fit_robot_frame(
     min_odometry_pairs: int = 5,
     known_distance: tuple[str, str, float] | None = None,
     previous_centers: dict[str, np.ndarray] | None = None,
+    camera_offset_m: float | None = None,
+    min_circle_photos: int = 8,
 ) -> Alignment:
     """The robot-frame similarity from camera geometry arrays (core of
     :func:`robot_frame_transform`).
@@ -276,6 +462,10 @@ def fit_robot_frame(
         U: (N, 3) camera up vectors (-y axis of the OpenCV camera), model frame.
         V: (N, 3) viewing directions (+z axis of the camera), model frame.
         previous_centers: photo name -> (3,) centre in the previous round's robot frame.
+        camera_offset_m: known distance (m) of the camera centre from the rotation axis;
+            when set, the scale comes from turn-in-place circles (odometry is the fallback
+            and a cross-check, both in ``stats``).
+        min_circle_photos: fewest photos of a circle used for the lever-arm scale.
 
     Returns:
         The alignment.
@@ -328,6 +518,43 @@ def fit_robot_frame(
             dp = np.subtract(b.odometry[:2], a.odometry[:2])
             rows.append((C2[j, :2] - C2[i, :2], h[i], h[j], dp))
     moving = sum(np.linalg.norm(r[3]) > 0.05 for r in rows)
+    odo_scale, odo_offset = None, None
+    if len(rows) >= min_odometry_pairs and moving >= 2:
+        dc, hi, hj, dp = (np.array(x) for x in zip(*rows, strict=True))
+        odo_scale, o, ostats = fit_scale_to_odometry(dc, hi, hj, dp)
+        stats.update(ostats)
+        stats["scale_odometry"] = odo_scale
+        odo_offset = (float(o[0]), float(o[1]))
+    circle_scale = None
+    if camera_offset_m is not None:
+        circle_scale, u, cstats = fit_scale_to_circles(
+            C2[:, :2],
+            h,
+            turn_in_place_circles(ph),
+            camera_offset_m,
+            min_photos=min_circle_photos,
+        )
+        stats.update(cstats)
+        stats["scale_circles"] = circle_scale
+        if circle_scale is None:
+            log.warning(
+                "sfm.camera_offset_m is set but no circle of >= %d photos turned in place "
+                "(>= 90 deg of heading) registered: metric scale from %s instead",
+                min_circle_photos,
+                "odometry" if odo_scale else "no source",
+            )
+        elif odo_scale:
+            diff = odo_scale / circle_scale - 1.0
+            stats["scale_odometry_vs_circles"] = diff
+            if abs(diff) > 0.05:
+                log.warning(
+                    "metric scale: odometry drive distances give %.1f %% %s than the camera "
+                    "lever arm (sfm.camera_offset_m = %.3f m); using the lever arm. Check "
+                    "the mount measurement or the wheel odometry.",
+                    abs(diff) * 100,
+                    "more" if diff > 0 else "less",
+                    camera_offset_m,
+                )
     if known_distance is not None:
         a, b, dist = known_distance
         if a not in idx or b not in idx:
@@ -337,22 +564,22 @@ def fit_robot_frame(
             )
         scale = dist / float(np.linalg.norm(C2[idx[a]] - C2[idx[b]]))
         scale_source = "known_distance"
-    elif len(rows) >= min_odometry_pairs and moving >= 2:
-        dc, hi, hj, dp = (np.array(x) for x in zip(*rows, strict=True))
-        scale, o, ostats = fit_scale_to_odometry(dc, hi, hj, dp)
-        stats.update(ostats)
-        if not scale > 0:
+    elif circle_scale is not None:
+        scale, scale_source = circle_scale, "camera_lever_arm"
+        offset = (float(circle_scale * u[0]), float(circle_scale * u[1]))
+    elif odo_scale is not None:
+        if not odo_scale > 0:
             raise ValueError(
-                f"odometry scale fit gave {scale:.3g}: odometry and SfM disagree; check the "
-                "capture log's odometry"
+                f"odometry scale fit gave {odo_scale:.3g}: odometry and SfM disagree; check "
+                "the capture log's odometry"
             )
-        scale_source, offset = "odometry", (float(o[0]), float(o[1]))
+        scale, scale_source, offset = odo_scale, "odometry", odo_offset
     elif prev_c:
         scale_source = "previous_model"
     else:
         log.warning(
             "no metric scale: %d consecutive odometry pairs (%d moving), no "
-            "sfm.known_distance; the model keeps SfM units (scale 1)",
+            "sfm.known_distance or sfm.camera_offset_m; the model keeps SfM units (scale 1)",
             len(rows),
             moving,
         )

@@ -50,6 +50,20 @@ class SfmConfig(BaseModel):
     camera_model: str = Field(
         "SIMPLE_RADIAL", description="COLMAP camera model of every camera (SIMPLE_RADIAL, ...)."
     )
+    fix_exif_focal: bool = Field(
+        True,
+        description=(
+            "Keep the focal length (px) fixed at the EXIF value when every photo's EXIF gives "
+            "FocalLength and FocalPlaneResolution (a calibrated or simulated camera). Circles "
+            "of photos turned in place couple the focal length with the cameras' forward "
+            "position: a refined focal 0.3 % low put the cameras ~1.3 cm too far out. Focals "
+            "from the 35 mm equivalent (rounded) or sfm.fallback_focal_factor are refined."
+        ),
+    )
+    refine_distortion: bool = Field(
+        True,
+        description="Bundle adjustment refines the radial distortion of the camera model.",
+    )
     num_threads: int = Field(-1, description="Threads for extraction/matching/mapping (-1: all).")
 
     # --- pairs ----------------------------------------------------------------------------
@@ -139,6 +153,45 @@ class SfmConfig(BaseModel):
         ),
     )
     use_compass: bool = Field(True, description="Heading of the robot frame from the compass.")
+    camera_offset_m: float | None = Field(
+        None,
+        gt=0.0,
+        description=(
+            "The camera centre's known distance (m) from the robot's rotation axis (its "
+            "mount, measured once; unset in a campaign config: from sim.camera). When set, "
+            "metric scale comes from the circles of photos turned in place (their camera "
+            "centres lie on circles of this radius, robust to wheel slip); odometry drive "
+            "distances are the fallback and a cross-check reported in report.json."
+        ),
+    )
+    min_circle_photos: int = Field(
+        8,
+        ge=3,
+        description=(
+            "Fewest registered photos of one turn-in-place circle (spanning >= 90 deg of "
+            "heading) for it to count in the lever-arm scale (sfm.camera_offset_m)."
+        ),
+    )
+    circle_prior_std_m: float = Field(
+        0.005,
+        ge=0.0,
+        description=(
+            "With sfm.camera_offset_m: standard deviation (m) of the position prior that "
+            "holds every photo of a turn-in-place circle on its circle (axis from the model, "
+            "radius the lever arm) in a final bundle adjustment; 0 = off."
+        ),
+    )
+    circle_max_residual_m: float = Field(
+        0.02,
+        gt=0.0,
+        description=(
+            "Photos farther than this (m) from their turn-in-place circle are moved back "
+            "onto it before that adjustment (misregistered runs of a circle)."
+        ),
+    )
+    circle_prior_iterations: int = Field(
+        2, ge=1, description="Rounds of circle re-fit and prior bundle adjustment."
+    )
     min_odometry_pairs: int = Field(
         5, ge=2, description="Consecutive photo pairs needed to fit the metric scale to odometry."
     )

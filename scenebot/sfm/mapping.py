@@ -84,28 +84,28 @@ def robust_refinement(
     iterations: int,
     num_threads: int = -1,
     relax_first: bool = False,
+    refine_focal_length: bool = True,
+    refine_extra_params: bool = True,
 ) -> dict:
     """Final robust bundle adjustment: drop observations beyond ``max_error_px``, then
     global BA with a Cauchy loss (scale 1 px), ``iterations`` times, and filter once more.
 
     COLMAP's incremental mapper keeps observations up to 4 px with a squared loss; in scenes
     with view-dependent features (highlights, occlusion corners) those bend the camera
-    trajectory by centimetres. Returns stats (observations removed, reprojection error px).
+    trajectory by centimetres. ``refine_focal_length`` / ``refine_extra_params``: whether
+    the bundle adjustments refine the focal length and the distortion (the principal point
+    is never refined). Returns stats (observations removed, reprojection error px).
     """
     before = rec.compute_mean_reprojection_error()
     removed = 0
     if relax_first:
-        opts = pycolmap.BundleAdjustmentOptions()
-        opts.print_summary = False
-        opts.ceres.solver_options.num_threads = num_threads
+        opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
         pycolmap.bundle_adjustment(rec, opts)
     for _ in range(iterations):
         removed += filter_observations(rec, max_error_px)
-        opts = pycolmap.BundleAdjustmentOptions()
-        opts.print_summary = False
+        opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
         opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
         opts.ceres.loss_function_scale = 1.0
-        opts.ceres.solver_options.num_threads = num_threads
         pycolmap.bundle_adjustment(rec, opts)
     removed += filter_observations(rec, max_error_px)
     return {
@@ -115,8 +115,20 @@ def robust_refinement(
     }
 
 
-def _options(
-    cfg: SfmConfig, names: list[str], continuing: bool = False
+def _ba_options(
+    num_threads: int, refine_focal_length: bool, refine_extra_params: bool
+) -> pycolmap.BundleAdjustmentOptions:
+    opts = pycolmap.BundleAdjustmentOptions()
+    opts.print_summary = False
+    opts.refine_focal_length = refine_focal_length
+    opts.refine_principal_point = False
+    opts.refine_extra_params = refine_extra_params
+    opts.ceres.solver_options.num_threads = num_threads
+    return opts
+
+
+def mapping_options(
+    cfg: SfmConfig, names: list[str], continuing: bool = False, fix_focal: bool = False
 ) -> pycolmap.IncrementalPipelineOptions:
     opts = pycolmap.IncrementalPipelineOptions()
     opts.num_threads = cfg.num_threads
@@ -125,6 +137,11 @@ def _options(
     opts.image_names = list(names)
     opts.multiple_models = True
     opts.extract_colors = True
+    opts.ba_refine_focal_length = not fix_focal
+    opts.ba_refine_principal_point = False
+    opts.ba_refine_extra_params = cfg.refine_distortion
+    opts.mapper.abs_pose_refine_focal_length = not fix_focal
+    opts.mapper.abs_pose_refine_extra_params = cfg.refine_distortion
     ratio = cfg.update_global_ba_ratio if continuing else cfg.global_ba_ratio
     opts.ba_global_frames_ratio = ratio
     opts.ba_global_points_ratio = ratio
@@ -140,6 +157,7 @@ def _run(
     cfg: SfmConfig,
     names: list[str],
     input_model: pycolmap.Reconstruction | None,
+    fix_focal: bool = False,
 ) -> dict[int, pycolmap.Reconstruction]:
     if work.exists():
         shutil.rmtree(work)
@@ -155,7 +173,9 @@ def _run(
         str(db_path),
         str(image_root),
         str(out),
-        options=_options(cfg, names, continuing=input_model is not None),
+        options=mapping_options(
+            cfg, names, continuing=input_model is not None, fix_focal=fix_focal
+        ),
         input_path=str(input_path),
     )
 
@@ -197,6 +217,7 @@ def map_photos(
     work: Path,
     cfg: SfmConfig,
     previous: pycolmap.Reconstruction | None = None,
+    fix_focal: bool = False,
 ) -> MappingResult:
     """Map the photos ``names``; keep the largest model.
 
@@ -212,6 +233,8 @@ def map_photos(
         work: scratch folder (replaced).
         cfg: sfm settings.
         previous: model to continue from, or ``None``.
+        fix_focal: keep every camera's focal length at its database prior (EXIF) in all
+            bundle adjustments and pose estimates.
 
     Returns:
         The kept model and the dropped photos with reasons.
@@ -227,7 +250,7 @@ def map_photos(
                 prev.deregister_frame(prev.image(iid).frame_id)
         mode = "incremental"
         try:
-            models = _run(db_path, image_root, work, cfg, names, prev)
+            models = _run(db_path, image_root, work, cfg, names, prev, fix_focal)
         except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
             log.warning("incremental mapping from the previous model failed (%s)", exc)
             models = {}
@@ -241,7 +264,7 @@ def map_photos(
             mode = "incremental->scratch"
             models = {}
     if not models:
-        models = _run(db_path, image_root, work, cfg, names, None)
+        models = _run(db_path, image_root, work, cfg, names, None, fix_focal)
     if not models:
         dropped = _reasons(db_path, names, set(), set(), cfg)
         raise SfmError(
@@ -274,8 +297,8 @@ def map_photos(
             str(image_root),
             str(tri_dir),
             clear_points=True,
-            options=_options(cfg, names),
-            refine_intrinsics=True,
+            options=mapping_options(cfg, names, fix_focal=fix_focal),
+            refine_intrinsics=not fix_focal,
         )
         log.info("re-triangulated the model in %.1f s", time.perf_counter() - t1)
     refinement = {}
@@ -287,6 +310,8 @@ def map_photos(
             cfg.refine_iterations,
             cfg.num_threads,
             relax_first=False,
+            refine_focal_length=not fix_focal,
+            refine_extra_params=cfg.refine_distortion,
         )
         refinement["seconds"] = time.perf_counter() - t1
     return MappingResult(best, mode, len(ranked), dropped, time.perf_counter() - t0, refinement)

@@ -6,6 +6,11 @@ Round r: a COLMAP model of ALL photos of rounds 0..r in the robot frame, written
 persistent database per scene (``results/{scene}/sfm_db/database.db`` in the workflow), so a
 round extracts features only of its new photos and matches only new pairs; mapping continues
 from round r-1's model (``inputs.previous_model``) with a from-scratch fallback.
+
+With the camera's lever arm (``cfg.camera_offset_m``) the metric scale comes from the circles
+of photos turned in place, and a final bundle adjustment holds every circle photo on its
+circle (``scenebot.sfm.circles``); photos whose EXIF gives the sensor-exact focal length
+keep it fixed (``cfg.fix_exif_focal``).
 """
 
 from __future__ import annotations
@@ -22,11 +27,12 @@ import numpy as np
 import pycolmap
 
 from scenebot.sfm.align import align_to_robot_frame, robot_frame_transform
+from scenebot.sfm.circles import repair_circles
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.descriptors import collect_point_descriptors, write_point_descriptors
 from scenebot.sfm.evaluate import evaluate_accuracy
 from scenebot.sfm.features import check_database_photos, extract, match_pairs, open_database
-from scenebot.sfm.mapping import SfmError, map_photos
+from scenebot.sfm.mapping import SfmError, map_photos, mapping_options
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
 
@@ -167,7 +173,9 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
 
     Returns:
         The report (also written to ``report.json``): counts, dropped photos with reasons,
-        pair counts, timings (s), alignment, accuracy summary.
+        pair counts, timings (s), alignment, ``scale`` (the source used, the lever-arm and
+        odometry estimates and their relative difference, per-circle fits),
+        ``circle_priors`` (photos moved back onto their circle, residuals), accuracy summary.
 
     Raises:
         PhotoError: fewer than 3 photos, corrupt or truncated JPEGs (named).
@@ -218,7 +226,14 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     log.info("pairs: %d selected, %d newly matched", len(all_pairs), mt["new"])
 
     names = [p.name for p in photos]
-    mres = map_photos(db_path, root, names, work / "mapping", cfg, previous)
+    fix_focal = cfg.fix_exif_focal and all(p.focal_source == "exif_focal_plane" for p in photos)
+    if cfg.fix_exif_focal and not fix_focal:
+        log.info(
+            "focal length refined by bundle adjustment: not every photo's EXIF gives "
+            "FocalLength and FocalPlaneResolution (sources: %s)",
+            ", ".join(sorted({p.focal_source for p in photos})),
+        )
+    mres = map_photos(db_path, root, names, work / "mapping", cfg, previous, fix_focal=fix_focal)
     timings["map"] = mres.seconds
     rec = mres.reconstruction
     n_reg = rec.num_reg_images()
@@ -247,9 +262,52 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         min_odometry_pairs=cfg.min_odometry_pairs,
         known_distance=(kd.image_a, kd.image_b, kd.distance_m) if kd else None,
         previous=previous,
+        camera_offset_m=cfg.camera_offset_m,
+        min_circle_photos=cfg.min_circle_photos,
     )
     align_to_robot_frame(rec, alignment)
     timings["align"] = time.perf_counter() - t
+    first = alignment  # the metric scale found on the mapped model (report.json "scale")
+    total_scale = alignment.scale
+
+    circle_stats: dict = {}
+    if (
+        cfg.camera_offset_m is not None
+        and cfg.circle_prior_std_m > 0
+        and alignment.scale_source == "camera_lever_arm"
+    ):
+        t = time.perf_counter()
+        rec, circle_stats = repair_circles(
+            rec,
+            photos,
+            alignment.camera_offset_m,
+            db_path,
+            root,
+            work / "circles",
+            triangulation_options=mapping_options(cfg, names, fix_focal=fix_focal),
+            max_residual_m=cfg.circle_max_residual_m,
+            prior_std_m=cfg.circle_prior_std_m,
+            iterations=cfg.circle_prior_iterations,
+            min_photos=cfg.min_circle_photos,
+            camera_yaw_deg=cfg.camera_yaw_deg,
+            max_error_px=cfg.refine_max_error_px,
+            refine_focal_length=not fix_focal,
+            refine_extra_params=cfg.refine_distortion,
+            num_threads=cfg.num_threads,
+        )
+        alignment = robot_frame_transform(
+            rec,
+            photos,
+            camera_yaw_deg=cfg.camera_yaw_deg,
+            use_compass=cfg.use_compass,
+            min_odometry_pairs=cfg.min_odometry_pairs,
+            previous=previous,
+            camera_offset_m=cfg.camera_offset_m,
+            min_circle_photos=cfg.min_circle_photos,
+        )
+        align_to_robot_frame(rec, alignment)
+        total_scale *= alignment.scale
+        timings["circle_priors"] = time.perf_counter() - t
 
     model_dir = Path(outputs.model_dir)
     if model_dir.exists():
@@ -280,6 +338,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         "mean_reprojection_error_px": rec.compute_mean_reprojection_error(),
         "mapping_mode": mres.mode,
         "refinement": mres.refinement,
+        "circle_priors": circle_stats,
         "models": mres.num_models,
         "dropped": mres.dropped,
         "features": {k: ext[k] for k in ("new", "reused", "no_features")},
@@ -289,6 +348,16 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             for c in rec.cameras.values()
         ],
         "focal_sources": sorted({p.focal_source for p in photos}),
+        "focal_fixed": fix_focal,
+        "scale": {
+            "source": first.scale_source,
+            "m_per_sfm_unit": total_scale,
+            "from_camera_lever_arm": first.stats.get("scale_circles"),
+            "from_odometry": first.stats.get("scale_odometry"),
+            "odometry_vs_lever_arm": first.stats.get("scale_odometry_vs_circles"),
+            "circles_used": first.stats.get("circles_used", 0),
+            "circles": first.stats.get("circles", []),
+        },
         "alignment": alignment.as_dict(),
         "timings_s": timings,
         "accuracy": {

@@ -1,4 +1,5 @@
-"""Make the canned CI photo set: ``tests/data/canned/round_000/capture/`` (images + log.jsonl).
+"""Make the canned CI photo set: ``tests/data/canned/round_000/capture/`` (images, log.jsonl,
+sim_state.json: where the simulated robot stopped, for the adaptive round that follows).
 
 45 photos of the built-in simulated office at 320x240, taken by the lead's capture stage
 (:func:`scenebot.capture.run_capture`) with config overrides: smaller camera, 36 photos,

@@ -17,6 +17,7 @@ def make_nxt_backend(
     emulated: bool,
     emulator: EmulatorConfig | None = None,
     inbox: Path | None = None,
+    start=None,
 ) -> tuple[NxtRobot, NxtCamera, object | None]:
     """``(robot, camera, world)`` for ``robot: nxt`` (``world`` is None) or ``nxt-emulated``.
 
@@ -29,6 +30,7 @@ def make_nxt_backend(
         inbox: photo inbox to use instead of ``nxt.camera.inbox`` (e.g. a folder inside the
             capture directory for the emulator, so the final move is a same-disk rename).
         emulator: emulator settings (timing, faults).
+        start: ``nxt-emulated`` only: the true pose the simulated world continues from.
     """
     if inbox is not None:
         nxt = nxt.model_copy(
@@ -39,7 +41,7 @@ def make_nxt_backend(
         return robot, camera, None
     from scenebot.capture import make_sim_backend
 
-    _, _, world = make_sim_backend(cfg)
+    _, _, world = make_sim_backend(cfg, start)
     robot, camera = make_nxt_robot(nxt, world=world, emulator=emulator)
     # like the simulator backend, log the true pose for evaluation (never used to decide)
     robot.truth_record = robot.emulator.truth_record  # type: ignore[method-assign]

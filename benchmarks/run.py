@@ -1,0 +1,680 @@
+"""Every speed figure of the project in one command, each beside a same-run reference.
+
+    TI_SKIP_VERSION_CHECK=ON nice -n 10 .venv/bin/python benchmarks/run.py [--quick]
+        [--only score,plan,...] [--sfm-full] [--arch auto|cpu] [--out benchmarks/results.md]
+
+Prints a markdown table and writes it to ``benchmarks/results.md`` (and ``results.json``):
+one row per figure with the median of repeated runs, the reference measured in the same run
+(the numpy scorer, brute-force matching, scipy's Dijkstra, a plane sweep, a bare ray cast, a
+from-scratch SfM run, ...), their ratio (``x faster`` = reference time / this time: above 1
+the figure is faster than its reference), and the machine (CPU model, cores, memory, GPU,
+library versions, load average before and after).
+
+Groups (``--only``): ``machine`` (a numpy matrix product: a yardstick to compare machines),
+``score``, ``localize``, ``plan``, ``sfm``, ``dense``, ``render`` (the simulator's photo),
+``campaign`` (the stage times snakemake recorded in ``results/*/benchmarks/**/*.tsv``, not
+re-measured), plus every ``benchmarks/bench_*.py`` module that defines the protocol
+function below (its file stem without ``bench_`` is its group name).
+
+Protocol for a benchmark module (e.g. ``benchmarks/bench_tour.py``)::
+
+    def bench(quick: bool) -> list[dict]:
+        # one dict per figure; times in "ms" or "s", medians of repeats
+        return [{"group": "tour", "name": "ULR render 640x480 (taichi)", "median": 41.0,
+                 "unit": "ms", "repeats": 5, "reference": "numpy ULR render",
+                 "reference_median": 950.0, "note": "per frame"}]
+
+``reference`` and ``reference_median`` may be None (no same-run reference). ``quick`` asks for
+the smallest sizes that still measure the figure (CI, tests). A module's ``bench`` takes
+precedence over the adapter of the same name below; the adapters reuse the standalone
+scripts' scenes and helpers (``bench_score.build_scene``, ``bench_plan.office_points``, ...),
+so the table and the scripts measure the same things.
+
+Default sizes finish in about 15 minutes on 2 busy cores; ``--quick`` in about 5. The 260-photo
+SfM acceptance run (about 8 minutes more) runs with ``--sfm-full``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import importlib.util
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+for p in (str(ROOT), str(HERE)):
+    if p not in sys.path:
+        sys.path.insert(0, p)
+
+GROUP_ORDER = ["machine", "score", "localize", "plan", "sfm", "dense", "render", "campaign"]
+
+
+@dataclass
+class Row:
+    """One figure of the table.
+
+    Attributes:
+        group: benchmark group (``score``, ``plan``, ...).
+        name: what is measured, with its size.
+        median: median over ``repeats`` runs, in ``unit``.
+        unit: ``ms`` or ``s``.
+        repeats: how many timed runs the median is over.
+        reference: the same-run reference, or None.
+        reference_median: its median, same unit, or None.
+        note: anything that qualifies the figure (quality, rates, sizes).
+    """
+
+    group: str
+    name: str
+    median: float
+    unit: str
+    repeats: int
+    reference: str | None = None
+    reference_median: float | None = None
+    note: str = ""
+
+    @property
+    def ratio(self) -> float | None:
+        """Reference time / this time (x faster than the reference), or None."""
+        if self.reference_median is None or not self.median or self.median <= 0:
+            return None
+        return self.reference_median / self.median
+
+
+def _row(d: dict | Row, group: str) -> Row:
+    if isinstance(d, Row):
+        return d
+    known = {k: d[k] for k in Row.__dataclass_fields__ if k in d}
+    known.setdefault("group", group)
+    return Row(**known)
+
+
+def timed(fn: Callable[[], object], repeats: int, warmup: int = 0) -> tuple[float, object]:
+    """(median wall seconds over ``repeats`` calls, the last result), after ``warmup`` calls."""
+    out = None
+    for _ in range(warmup):
+        out = fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts), out
+
+
+def load_module(name: str, folder: Path = HERE):
+    """Import ``<folder>/<name>.py`` (default ``benchmarks/``, not a package) as a module."""
+    path = Path(folder) / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"scenebot_bench_{name}", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses in the module look themselves up there
+    spec.loader.exec_module(mod)
+    return mod
+
+
+# ------------------------------------------------------------------------------- machine
+def _cmd(args: list[str]) -> str | None:
+    try:
+        return subprocess.run(args, capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def describe_machine() -> dict:
+    """CPU model, cores, memory, GPU, library versions, load, commit."""
+    info: dict = {"date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds")}
+    cpu = None
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    info["cpu"] = cpu or platform.processor() or platform.machine()
+    info["cores"] = os.cpu_count()
+    try:
+        info["cores_usable"] = len(os.sched_getaffinity(0))
+    except AttributeError:
+        info["cores_usable"] = os.cpu_count()
+    try:
+        mem = Path("/proc/meminfo").read_text().split("\n")[0].split()[1]
+        info["memory_gib"] = round(int(mem) / 2**20, 1)
+    except (OSError, IndexError, ValueError):
+        info["memory_gib"] = None
+    gpu = _cmd(["nvidia-smi", "--query-gpu=name,memory.total", "--format=csv,noheader"])
+    info["gpu"] = gpu or "none"
+    info["os"] = platform.platform()
+    info["python"] = platform.python_version()
+    versions = {}
+    for mod in ("numpy", "scipy", "pycolmap", "open3d", "taichi", "cv2", "snakemake"):
+        try:
+            m = __import__(mod)
+            v = getattr(m, "__version__", None)
+            if mod == "taichi" and v is None:
+                v = ".".join(str(x) for x in m.__version__)
+            versions[mod] = str(v)
+        except Exception as exc:
+            versions[mod] = f"unavailable ({type(exc).__name__})"
+    try:
+        import pycolmap
+
+        versions["pycolmap_cuda"] = str(bool(pycolmap.has_cuda))
+    except Exception:
+        pass
+    info["versions"] = versions
+    info["commit"] = _cmd(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"])
+    info["load_avg_start"] = [round(x, 2) for x in os.getloadavg()]
+    return info
+
+
+def bench_machine(quick: bool) -> list[Row]:
+    """A yardstick: numpy float64 matrix product and a pure-Python loop."""
+    import numpy as np
+
+    a = np.random.default_rng(0).random((1024, 1024))
+    reps = 3 if quick else 7
+    t_mm, _ = timed(lambda: a @ a, reps, warmup=1)
+
+    def loop():
+        s = 0
+        for i in range(1_000_000):
+            s += i * i
+        return s
+
+    t_py, _ = timed(loop, reps)
+    gflops = 2 * 1024**3 / t_mm / 1e9
+    return [
+        Row("machine", "numpy 1024x1024 float64 matmul", t_mm * 1e3, "ms", reps,
+            note=f"{gflops:.1f} GFLOP/s"),
+        Row("machine", "pure-Python loop, 1e6 iterations", t_py * 1e3, "ms", reps),
+    ]  # fmt: skip
+
+
+# --------------------------------------------------------------------------------- score
+def bench_score(quick: bool, arch: str = "cpu") -> list[Row]:
+    """Scoring speed at the acceptance point (80x60, 100 sources): taichi vs numpy."""
+    import numpy as np
+
+    bs = load_module("bench_score")
+    from scenebot.score.candidates import sample_candidates
+    from scenebot.score.config import ScoreConfig
+    from scenebot.score.kernel import init_taichi
+    from scenebot.score.mesh import decimate
+
+    got = init_taichi("cpu" if arch == "cpu" else "auto")
+    rng = np.random.default_rng(0)
+    V0, F0, R, t, K, fs = bs.build_scene(rng)
+    cfg = ScoreConfig()
+    V, F = decimate(V0, F0, cfg.max_triangles)
+    n = 400 if quick else 2000
+    cands = sample_candidates(fs, n, rng, "bench")
+    w, h, S = 80, 60, 100
+    tk, ref = bs.scorers(V, F, R, t, K, w, h, S, cfg.batch_size)
+    reps = 3 if quick else 5
+    t_tk, _ = timed(lambda: tk.score(cands[:n]), reps, warmup=1)
+    m = 12 if quick else 40
+    t_np, _ = timed(lambda: ref.score(cands[:m]), 3)
+    a, b = tk.score(cands[:m]).score_deg, ref.score(cands[:m]).score_deg
+    diff = float(np.nanmean(np.abs(a - b)))
+    per_tk, per_np = t_tk / n * 1e3, t_np / m * 1e3
+    return [
+        Row("score", f"score one candidate, {w}x{h} px, {S} sources, {len(F)} triangles "
+            f"(taichi {got}, batches of {n})", per_tk, "ms", reps, "numpy reference scorer",
+            per_np, f"{1e3 / per_tk:.0f} vs {1e3 / per_np:.1f} evals/s; mean |score diff| "
+            f"{diff:.4f} deg"),
+    ]  # fmt: skip
+
+
+# ------------------------------------------------------------------------------ localize
+def bench_localize(quick: bool) -> list[Row]:
+    """FLANN vs brute-force matching, whole localization, DLT vs pycolmap pose estimation."""
+    import cv2
+    import numpy as np
+    import pycolmap
+
+    bl = load_module("bench_localize")
+    from scenebot.config import SimConfig
+    from scenebot.localize import LocalizationMap, LocalizeConfig, localize
+    from scenebot.localize.index import DescriptorIndex, MapDescriptors
+    from scenebot.localize.match import match_to_map
+    from scenebot.scene.office import office
+    from scenebot.sim.world import SimWorld
+
+    rows: list[Row] = []
+    scene = office(7)
+    world = SimWorld(scene, SimConfig(), scene.start, seed=0)
+    md = bl.build_office_map(world, 4, 12)  # cached in benchmarks/out/
+    intr = world.intrinsics
+    cam = pycolmap.Camera(model="PINHOLE", width=intr.width, height=intr.height,
+                          params=[intr.fx, intr.fy, intr.cx, intr.cy])  # fmt: skip
+    reps = 3 if quick else 5
+    # --- matching: 1,000 query descriptors against a 160,000-row map (bench_localize's data)
+    n_map, n_q = (40_000, 500) if quick else (160_000, 1000)
+    rng = np.random.default_rng(7)
+    base = md.descriptors
+    rows_i = np.tile(np.arange(len(base)), math.ceil(n_map / len(base)))[:n_map]
+    noise = rng.normal(0, 4.0, (n_map, 128)) * (np.arange(n_map) >= len(base))[:, None]
+    big = np.clip(base[rows_i] + noise, 0, 255).astype(np.uint8)
+    bigmap = MapDescriptors(md.point_ids[rows_i], md.xyz[rows_i], big)
+    q_rows = rng.choice(len(base), n_q, replace=False)
+    q = np.clip(base[q_rows] + rng.normal(0, 6.0, (n_q, 128)), 0, 255).astype(np.uint8)
+    checks = LocalizeConfig().flann_checks
+    t0 = time.perf_counter()
+    index = DescriptorIndex(bigmap.descriptors, trees=4, checks=checks)
+    build_s = time.perf_counter() - t0
+    t_fl, _ = timed(lambda: match_to_map(q, index, bigmap, knn=6, ratio=0.8), reps)
+    bf = cv2.BFMatcher(cv2.NORM_L2)
+    qf, mf = q.astype(np.float32), bigmap.descriptors.astype(np.float32)
+    t_bf, exact = timed(lambda: bf.knnMatch(qf, mf, k=1), 1 if quick else 3)
+    idx_f, _ = index.knn(q, 1)
+    exact_pid = bigmap.point_ids[[e[0].trainIdx for e in exact]]
+    recall = float(np.mean(bigmap.point_ids[idx_f[:, 0]] == exact_pid))
+    rows.append(Row("localize", f"match {n_q} descriptors to a {n_map // 1000}k-row map "
+                    f"(FLANN, 4 trees, {checks} checks)", t_fl * 1e3, "ms", reps,
+                    "brute force (OpenCV BFMatcher, exact)", t_bf * 1e3,
+                    f"nearest-point recall {recall:.3f}; index build {build_s:.1f} s"))  # fmt: skip
+    # --- whole localization of one photo, and its pose step: DLT (paper) vs pycolmap
+    plane = {"camera_plane_z_m": scene.floor_z + world.cfg.camera.height_m}
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        R, c = bl.camera_at(world, bl.free_spot(world, rng, 0.5), rng.uniform(0, 2 * math.pi))
+        img = world.renderer.render(intr, R, c, rng)
+        if localize(img, LocalizationMap(md, cam), LocalizeConfig(**plane)).ok:
+            break
+    res = {}
+    for method in ("dlt", "pycolmap"):
+        cfg = LocalizeConfig(method=method, **plane)
+        lmap = LocalizationMap(md, cam, cfg=cfg)
+        tim = []
+        for _ in range(reps):
+            est = localize(img, lmap, cfg)
+            tim.append([est.timings_s[k] * 1e3 for k in ("extract", "match", "pose", "total")])
+        res[method] = np.median(np.array(tim), axis=0)
+    d, p = res["dlt"], res["pycolmap"]
+    rows.append(Row("localize", f"whole localization of a 640x480 photo (DLT, first octave "
+                    f"{LocalizeConfig().sift_first_octave})", d[3], "ms", reps,
+                    "same with the pycolmap estimator", p[3],
+                    f"extract {d[0]:.0f} ms, match {d[1]:.0f} ms, pose {d[2]:.0f} ms; map "
+                    f"{len(md.point_ids)} descriptors"))  # fmt: skip
+    rows.append(Row("localize", "pose from matches: RANSAC + DLT + refinement (paper)", d[2],
+                    "ms", reps, "pycolmap P3P LO-RANSAC + refinement", p[2]))  # fmt: skip
+    return rows
+
+
+# ---------------------------------------------------------------------------------- plan
+def bench_plan(quick: bool) -> list[Row]:
+    """KDE grid + A* + simplification on 100x100 and 1000x1000 grids vs scipy Dijkstra."""
+    import numpy as np
+
+    bp = load_module("bench_plan")
+    from scenebot.plan import PlanConfig, build_navgrid
+    from scenebot.plan.astar import astar, effective_cost
+    from scenebot.plan.simplify import simplify_path
+
+    rng = np.random.default_rng(0)
+    pts = bp.office_points(rng)
+    cams = np.array([[0.4, 0.4], [5.6, 4.6]])
+    start, goal = np.array([0.5, 1.5]), np.array([4.8, 0.5])
+    rows = []
+    for n in (100, 1000):
+        cfg = PlanConfig(n_cells=n, margin_m=0.4)
+        reps = (5 if n == 100 else 3) if quick else (7 if n == 100 else 3)
+        tot, parts = [], []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            grid = build_navgrid(pts, cams, cfg)
+            t1 = time.perf_counter()
+            g = grid.geometry
+            s, t = tuple(g.cell_of(start)), tuple(g.cell_of(goal))
+            res = astar(grid.cost_per_m, grid.lethal, s, t, g.cell_m)
+            t2 = time.perf_counter()
+            simplify_path(res.cells, effective_cost(grid.cost_per_m, grid.lethal), g.cell_m)
+            t3 = time.perf_counter()
+            tot.append(t3 - t0)
+            parts.append((t1 - t0, t2 - t1, t3 - t2))
+        med = np.median(np.array(parts), axis=0) * 1e3
+        ref = statistics.median(
+            bp.reference_dijkstra_s(effective_cost(grid.cost_per_m, grid.lethal), s, g.cell_m)
+            for _ in range(3)
+        )
+        rows.append(Row("plan", f"KDE + A* + simplify, {g.shape[1]}x{g.shape[0]} grid",
+                        statistics.median(tot) * 1e3, "ms", reps,
+                        "scipy Dijkstra from the start cell (search only)", ref * 1e3,
+                        f"kde {med[0]:.1f} / A* {med[1]:.1f} / simplify {med[2]:.1f} ms; "
+                        f"budget {bp.BUDGET_S[n] * 1e3:g} ms; A* alone {med[1] / (ref * 1e3):.2f}"
+                        " x Dijkstra time"))  # fmt: skip
+    return rows
+
+
+# ----------------------------------------------------------------------------------- sfm
+def bench_sfm(quick: bool, full: bool = False, work: Path | None = None) -> list[Row]:
+    """SfM stage on a small fixed capture set: round update vs from scratch (the reference).
+
+    The small set is the ray-cast synthetic room of ``bench_sfm`` (two rounds); ``full``
+    also runs the issue's acceptance case (200 + 60 simulator photos at 640x480).
+    """
+    import logging
+    import shutil
+
+    logging.getLogger("scenebot").setLevel(logging.WARNING)
+    bsf = load_module("bench_sfm")
+    from scenebot.sfm.config import SfmConfig
+    from scenebot.sfm.stage import SfmInputs, SfmOutputs
+
+    work = Path(work or "/tmp/scenebot_bench/sfm")
+    rows = []
+    cases = [("synthetic room", work / "synthetic", None)]
+    if full:
+        cases.append(("simulated office 200 + 60 photos", work / "sim", (200, 60)))
+    for label, scene, sim in cases:
+        if sim is None:
+            bsf.make_synthetic_rounds(scene)
+        else:
+            bsf.make_sim_rounds(scene, ROOT / "config.yaml", *sim)
+        caps = [scene / "round_000/capture", scene / "round_001/capture"]
+        offset_of = getattr(bsf, "camera_offset_from_log", None)  # the camera mount, if known
+        cfg = SfmConfig(plots=False)
+        if offset_of is not None and "camera_offset_m" in SfmConfig.model_fields:
+            cfg = SfmConfig(plots=False, camera_offset_m=offset_of(caps[0] / "log.jsonl"))
+        reps = 1 if (quick or sim) else 2
+        scratch, update, reps_done = [], [], 0
+        for _ in range(reps):
+            runs = work / f"runs_{scene.name}"
+            shutil.rmtree(runs, ignore_errors=True)
+            s, rep_s = bsf.timed_run(cfg, SfmInputs(runs / "a/database.db", caps),
+                                     SfmOutputs(runs / "a/round_001/sfm"))  # fmt: skip
+            bsf.timed_run(cfg, SfmInputs(runs / "b/database.db", caps[:1]),
+                          SfmOutputs(runs / "b/round_000/sfm"))  # fmt: skip
+            u, rep_u = bsf.timed_run(
+                cfg,
+                SfmInputs(runs / "b/database.db", caps, previous_model=runs / "b/round_000/sfm"),
+                SfmOutputs(runs / "b/round_001/sfm"),
+            )
+            scratch.append(s)
+            update.append(u)
+            reps_done += 1
+        acc = rep_s.get("accuracy", {})
+        pos = acc.get("position_error_m", {}).get("median", float("nan")) * 100
+        n0 = sum(1 for _ in (caps[0] / "images").glob("*.jpg"))
+        rows.append(Row("sfm", f"sfm stage from scratch, {label} ({rep_s['photos']} photos)",
+                        statistics.median(scratch), "s", reps_done, None, None,
+                        f"registered {rep_s['registered']}/{rep_s['photos']}, median position "
+                        f"error {pos:.2f} cm"))  # fmt: skip
+        rows.append(Row("sfm", f"sfm round update, {label} (+{rep_u['photos'] - n0} photos to "
+                        f"{n0})", statistics.median(update), "s", reps_done,
+                        "the same from scratch", statistics.median(scratch),
+                        f"mode {rep_u.get('mapping_mode')}; registered "
+                        f"{rep_u['registered']}"))  # fmt: skip
+    return rows
+
+
+# --------------------------------------------------------------------------------- dense
+def bench_dense(quick: bool, arch: str = "cpu") -> list[Row]:
+    """One depth map (photometric + geometric + filter) vs a numpy/OpenCV plane sweep."""
+    bd = load_module("bench_dense")
+    from scenebot.dense.config import PatchMatchConfig
+    from scenebot.dense.evaluate import depth_map_metrics
+    from scenebot.dense.patchmatch import PatchMatchSolver, init_taichi
+
+    got = init_taichi(arch, 2 if arch == "cpu" else -1)
+    w, h = (320, 240) if quick else (640, 480)
+    n_src = 4
+    views, truth = bd.make_views(w, h, n_src + 1)
+    mid = n_src // 2
+    ref, gt = views[mid], truth[mid]
+    srcs = [v for i, v in enumerate(views) if i != mid]
+    solver = PatchMatchSolver(PatchMatchConfig())
+    rng = (0.5, 4.5)
+    src_photo = [solver.estimate(v, [x for x in views if x is not v], rng).depth for v in srcs]
+
+    def full():
+        p = solver.estimate(ref, srcs, rng)
+        g = solver.estimate(ref, srcs, rng, src_depths=src_photo, init=(p.depth, p.normal))
+        return solver.filter(ref, srcs, g, src_photo)
+
+    reps = 2 if quick else 3
+    t_pm, r = timed(full, reps, warmup=1)
+    t_ps, d = timed(lambda: bd.plane_sweep(ref, srcs, rng), 1 if quick else 2)
+    m_pm, m_ps = depth_map_metrics(r.depth, gt), depth_map_metrics(d, gt)
+    return [
+        Row("dense", f"depth map {w}x{h}, {n_src} sources: PatchMatch photometric + geometric "
+            f"+ filter (taichi {got})", t_pm, "s", reps, "plane sweep, 96 planes (numpy/OpenCV)",
+            t_ps, f"within 2%: {m_pm['accuracy']:.3f} of {m_pm['coverage']:.3f} covered vs "
+            f"{m_ps['accuracy']:.3f} of {m_ps['coverage']:.3f}"),
+    ]  # fmt: skip
+
+
+# -------------------------------------------------------------------------------- render
+def bench_render(quick: bool) -> list[Row]:
+    """The simulator's photo (640x480, office): full render vs a bare ray cast of its pixels."""
+    import numpy as np
+
+    from scenebot.config import SimConfig
+    from scenebot.scene.office import office
+    from scenebot.sim.renderer import Renderer, look_rotation
+    from scenebot.sim.world import SimWorld
+
+    scene = office(7)
+    cfg = SimConfig()
+    world = SimWorld(scene, cfg, scene.start, seed=0)
+    intr = world.intrinsics
+    rng = np.random.default_rng(3)
+    poses = []
+    lo, hi = scene.bounds
+    while len(poses) < (3 if quick else 6):
+        xy = rng.uniform(lo[:2] + 0.3, hi[:2] - 0.3)
+        if world.collision_map.clearance_at(xy) > 0.3:
+            th = rng.uniform(0, 2 * math.pi)
+            poses.append((look_rotation(th), np.array([*xy, cfg.camera.height_m])))
+    plain = Renderer(scene, noise_sigma=cfg.camera.noise_sigma, antialias=False)
+    aa = world.renderer
+    k = [0]
+
+    def cycle(fn):
+        def f():
+            R, c = poses[k[0] % len(poses)]
+            k[0] += 1
+            return fn(R, c)
+
+        return f
+
+    def bare(R, c):
+        d = plain._pixel_rays(intr, R)
+        return plain.cast(np.broadcast_to(c, d.shape), d)
+
+    reps = len(poses)
+    t_ray, _ = timed(cycle(bare), reps, warmup=1)
+    t_aa, _ = timed(cycle(lambda R, c: aa.render(intr, R, c, rng)), reps, warmup=1)
+    t_pl, _ = timed(cycle(lambda R, c: plain.render(intr, R, c, rng)), reps, warmup=1)
+    ref = "open3d ray cast of the same 640x480 rays (geometry only)"
+    return [
+        Row("render", f"simulator photo {intr.width}x{intr.height}, office, antialiased "
+            "(the default)", t_aa * 1e3, "ms", reps, ref, t_ray * 1e3,
+            f"{len(scene.triangles)} triangles"),
+        Row("render", f"simulator photo {intr.width}x{intr.height}, office, no antialiasing",
+            t_pl * 1e3, "ms", reps, ref, t_ray * 1e3),
+    ]  # fmt: skip
+
+
+# ------------------------------------------------------------------------------ campaign
+def bench_campaign(quick: bool, results: Path = ROOT / "results") -> list[Row]:
+    """Stage times snakemake recorded (``benchmark:`` TSVs) in ``results/*/benchmarks/``."""
+    rows = []
+    for tsv in sorted(Path(results).glob("*/benchmarks/**/*.tsv")):
+        lines = [ln.split("\t") for ln in tsv.read_text().splitlines() if ln.strip()]
+        if len(lines) < 2:
+            continue
+        head = lines[0]
+        vals = [dict(zip(head, ln, strict=False)) for ln in lines[1:]]
+        try:
+            secs = [float(v["s"]) for v in vals]
+        except (KeyError, ValueError):
+            continue
+        scene = tsv.relative_to(results).parts[0]
+        stage = tsv.relative_to(Path(results) / scene / "benchmarks").with_suffix("")
+        note = "recorded by snakemake when the campaign ran (not re-measured)"
+        try:
+            cpu = statistics.median(float(v["cpu_time"]) for v in vals)
+            rss = statistics.median(float(v["max_rss"]) for v in vals)
+            note = f"CPU {cpu:.0f} s, max RSS {rss:.0f} MB; " + note
+        except (KeyError, ValueError):
+            pass
+        mtime = dt.datetime.fromtimestamp(tsv.stat().st_mtime, dt.UTC).strftime("%Y-%m-%d %H:%M")
+        rows.append(Row("campaign", f"{scene}: {stage}", statistics.median(secs), "s",
+                        len(secs), note=f"{note}, {mtime} UTC"))  # fmt: skip
+    if rows:
+        total = sum(r.median for r in rows if r.name.split(": ")[0] == rows[0].name.split(": ")[0])
+        rows.append(Row("campaign", f"{rows[0].name.split(': ')[0]}: all stages recorded", total,
+                        "s", 1, note="sum of the medians above"))  # fmt: skip
+    return rows
+
+
+# ---------------------------------------------------------------------------------- main
+def _fmt(x: float | None) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    if x >= 100:
+        return f"{x:.0f}"
+    if x >= 10:
+        return f"{x:.1f}"
+    if x >= 0.1:
+        return f"{x:.2f}"
+    return f"{x:.3g}"
+
+
+def markdown(rows: list[Row], machine: dict, args_line: str, seconds: float) -> str:
+    """The table and the machine, as markdown."""
+    v = machine["versions"]
+    lines = [
+        f"Measured {machine['date_utc']} by `{args_line}` in {seconds / 60:.1f} min "
+        f"(commit {machine.get('commit') or '?'}).",
+        "",
+        f"Machine: {machine['cpu']}, {machine['cores']} cores ({machine['cores_usable']} usable), "
+        f"{machine['memory_gib']} GiB RAM, GPU: {machine['gpu']}; {machine['os']}; Python "
+        f"{machine['python']}, "
+        + ", ".join(f"{k} {val}" for k, val in v.items())
+        + f". Load average at start {machine['load_avg_start']}, at end "
+        f"{machine.get('load_avg_end')} (other work on the machine slows every figure).",
+        "",
+        "Medians of the repeats; `x faster` = reference time / this time (above 1: faster than "
+        "the reference measured in the same run).",
+        "",
+        "| group | measurement | median | reference (same run) | reference median | x faster "
+        "| repeats | note |",
+        "|---|---|---:|---|---:|---:|---:|---|",
+    ]
+
+    def cell(text: str | None) -> str:
+        return (text or "-").replace("|", "\\|")
+
+    for r in rows:
+        ratio = r.ratio
+        lines.append(
+            f"| {r.group} | {cell(r.name)} | {_fmt(r.median)} {r.unit} | {cell(r.reference)} | "
+            f"{_fmt(r.reference_median)}{' ' + r.unit if r.reference_median is not None else ''}"
+            f" | {_fmt(ratio)} | {r.repeats} | {cell(r.note) if r.note else ''} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def discover(
+    quick: bool, arch: str, full_sfm: bool, only: set[str] | None, folder: Path = HERE
+) -> dict:
+    """Group name -> callable returning rows: built-in adapters, overridden by the modules
+    ``<folder>/bench_*.py`` that define ``bench(quick)``."""
+    groups: dict[str, Callable[[], list]] = {
+        "machine": lambda: bench_machine(quick),
+        "score": lambda: bench_score(quick, arch),
+        "localize": lambda: bench_localize(quick),
+        "plan": lambda: bench_plan(quick),
+        "sfm": lambda: bench_sfm(quick, full_sfm),
+        "dense": lambda: bench_dense(quick, arch),
+        "render": lambda: bench_render(quick),
+        "campaign": lambda: bench_campaign(quick),
+    }
+    for path in sorted(Path(folder).glob("bench_*.py")):
+        name = path.stem.removeprefix("bench_")
+        if only is not None and name not in only:
+            continue
+        try:
+            text = path.read_text()
+        except OSError:
+            continue
+        if "def bench(" not in text:
+            continue  # no protocol function: its adapter above (if any) runs it
+
+        def call(stem=path.stem):
+            return load_module(stem, folder).bench(quick)
+
+        groups[name] = call
+    order = GROUP_ORDER + sorted(k for k in groups if k not in GROUP_ORDER)
+    return {k: groups[k] for k in order if k in groups and (only is None or k in only)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smallest sizes (about 5 minutes)")
+    ap.add_argument("--only", help="comma-separated groups (machine,score,localize,...)")
+    ap.add_argument("--sfm-full", action="store_true", help="also the 260-photo SfM run")
+    ap.add_argument("--arch", choices=["auto", "cpu"], default="auto",
+                    help="taichi arch of score and dense (auto: the GPU when there)")  # fmt: skip
+    ap.add_argument("--out", type=Path, default=HERE / "results.md",
+                    help="markdown output (the JSON goes beside it)")  # fmt: skip
+    ap.add_argument("--no-write", action="store_true", help="print only")
+    args = ap.parse_args(argv)
+    only = set(args.only.split(",")) if args.only else None
+    t_start = time.perf_counter()
+    machine = describe_machine()
+    rows: list[Row] = []
+    failures: dict[str, str] = {}
+    groups = discover(args.quick, args.arch, args.sfm_full, only)
+    for name, fn in groups.items():
+        t0 = time.perf_counter()
+        print(f"[{time.strftime('%H:%M:%S')}] {name} ...", file=sys.stderr, flush=True)
+        try:
+            got = [_row(r, name) for r in fn()]
+        except Exception as exc:
+            failures[name] = f"{type(exc).__name__}: {exc}"
+            traceback.print_exc()
+            got = [Row(name, "FAILED", float("nan"), "s", 0, note=failures[name][:200])]
+        rows += got
+        print(f"    {name}: {len(got)} rows in {time.perf_counter() - t0:.0f} s",
+              file=sys.stderr, flush=True)  # fmt: skip
+    machine["load_avg_end"] = [round(x, 2) for x in os.getloadavg()]
+    seconds = time.perf_counter() - t_start
+    given = argv if argv is not None else sys.argv[1:]
+    line = " ".join(["python benchmarks/run.py", *given])
+    md = markdown(rows, machine, line.strip(), seconds)
+    print(md)
+    if not args.no_write:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("# scenebot benchmarks\n\n" + md)
+        data = {
+            "machine": machine,
+            "seconds": seconds,
+            "command": line.strip(),
+            "rows": [asdict(r) | {"ratio": r.ratio} for r in rows],
+            "failures": failures,
+        }
+        args.out.with_suffix(".json").write_text(json.dumps(data, indent=1, default=str) + "\n")
+        print(f"written: {args.out} and {args.out.with_suffix('.json')}", file=sys.stderr)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

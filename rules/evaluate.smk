@@ -1,0 +1,90 @@
+# Evaluation against the simulator's truth (paper V.B and beyond): per round and for the
+# campaign's result. Simulated robots only; the truth is read here and by no decision.
+
+
+# The observable surface of the true scene: computed once per scene (cached in the .npz,
+# keyed by the geometry and the settings), drawn top-down in the .png.
+rule observable:
+    input:
+        code=stage_code("evaluate"),
+    output:
+        npz=f"{RESULTS}/eval/observable_surface.npz",
+        png=f"{RESULTS}/eval/observable_surface.png",
+    log:
+        f"{RESULTS}/logs/observable.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/observable.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("world", "sim", "evaluate"),
+    shell:
+        "{params.py:q} -m scenebot observable --params {params.cfg:q} "
+        "--out {output.npz:q} --png {output.png:q} 2> >(tee {log:q} >&2)"
+
+
+# One round's figures: photos per round, goals reached, SfM and localization accuracy. The
+# round does not wait for the campaign's end; the dense cloud is evaluated by evaluate_final.
+rule evaluate:
+    input:
+        code=stage_code("evaluate"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+        captures=captures_until,
+    output:
+        json=f"{RESULTS}/round_{{r}}/evaluation.json",
+        png=f"{RESULTS}/round_{{r}}/evaluation.png",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/evaluate.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/evaluate.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("world", "sim", "evaluate"),
+        scene_dir=lambda w, output: Path(output.json).parents[1],
+    shell:
+        "{params.py:q} -m scenebot evaluate --params {params.cfg:q} "
+        "--scene-dir {params.scene_dir:q} --round {wildcards.r} --out {output.json:q} "
+        "2> >(tee {log:q} >&2)"
+
+
+# The campaign's result: the last round's figures plus the dense cloud's accuracy and
+# completeness at 1, 2, 5 cm against the observable surface.
+rule evaluate_final:
+    input:
+        code=stage_code("evaluate"),
+        model=last_round_model,
+        captures=captures_of_campaign,
+        observable=observable_input,
+        dense=f"{RESULTS}/final/dense/fused.ply",
+    output:
+        json=f"{RESULTS}/final/evaluation.json",
+        png=f"{RESULTS}/final/evaluation.png",
+    log:
+        f"{RESULTS}/logs/evaluate_final.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/evaluate_final.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("world", "sim", "evaluate"),
+        scene_dir=lambda w, output: Path(output.json).parents[1],
+        round=last_round_index,
+        dense=lambda w, input: f"--dense {input.dense!r}" if SIMULATED else "",
+        observable=lambda w, input: (
+            f"--observable {input.observable[0]!r}" if input.observable else ""
+        ),
+    shell:
+        "{params.py:q} -m scenebot evaluate --params {params.cfg:q} "
+        "--scene-dir {params.scene_dir:q} --round {params.round} {params.dense} "
+        "{params.observable} --out {output.json:q} 2> >(tee {log:q} >&2)"
+
+
+# `snakemake --cores 2 evaluation`: evaluate every round of the campaign.
+rule evaluation:
+    input:
+        evaluation_products,
+    localrule: True

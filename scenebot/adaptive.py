@@ -1,0 +1,389 @@
+"""Adaptive capture, rounds >= 1 (paper IV.B-C): go to the goals of the last map, take photos.
+
+Reads the previous round's folder ``round_{r-1}/``: the map (``sfm/``, for visual
+localization), ``goals.json`` (camera poses where a photo is missing), ``paths.json`` (the
+planned route) and ``navgrid.npz`` (the grid the follower replans on, marking obstacles the
+bumper finds). Writes ``round_{r}/capture/`` like round 0:
+
+* ``images/r{r}_NNNN.jpg``: the photos taken at the goals (read-only, never deleted);
+* ``nav/``: the localization photos taken on the way (kept, not part of the map);
+* ``session.jsonl`` / ``log.jsonl``: photo records carry ``odometry``, ``localization``
+  (the robot pose estimated from that very photo, map frame), ``localization_inliers`` and
+  ``goal_index``; events ``follow_start``, ``localize``, ``obstacle``, ``replan``,
+  ``follow_end``, ``goal_reached`` / ``goal_abandoned`` / ``goal_skipped`` (with the reason);
+  in the simulator every record carries ``truth`` (evaluation only);
+* ``trajectory.png``: the map-frame picture of the round (grid, planned and driven paths,
+  fixes, photos, obstacles, goals reached and abandoned);
+* ``sim_state.json`` (simulator backends only): the world's true robot pose at the end, so
+  the next round's simulated world continues where this one stopped. It is physics state,
+  like the room itself; no decision reads it.
+
+Photo pattern at a goal (``adaptive.pattern``): ``fan`` takes the goal heading and
+neighbours ``fan_step_deg`` apart (default 5 photos over 60 degrees: the heuristic asked for
+that view, and neighbours give the new photos baselines to each other and overlap with the
+map); ``circle`` takes a short circle of ``circle_photos``. The campaign's evaluation
+compares the two.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import math
+import os
+import stat
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from scenebot.capturelog import CaptureLog
+from scenebot.config import Config
+from scenebot.robot.base import Pose2D, wrap_angle
+
+log = logging.getLogger("scenebot.adaptive")
+
+SIM_STATE = "sim_state.json"
+
+
+def goal_headings(theta: float, cfg) -> list[float]:
+    """Headings (rad) of the photos at a goal whose requested heading is ``theta``.
+
+    ``fan``: theta first, then theta +- step, +- 2 step ... (``fan_photos`` in all);
+    ``circle``: ``circle_photos`` evenly spaced starting at theta.
+    """
+    if cfg.pattern == "circle":
+        n = cfg.circle_photos
+        return [theta + 2 * math.pi * k / n for k in range(n)]
+    step = math.radians(cfg.fan_step_deg)
+    out = [theta]
+    k = 1
+    while len(out) < cfg.fan_photos:
+        out.append(theta + k * step)
+        if len(out) < cfg.fan_photos:
+            out.append(theta - k * step)
+        k += 1
+    # sweep once from one side to the other (fewer turns, less slip)
+    return sorted(out, key=lambda h: h - theta)
+
+
+def read_sim_state(capture_dir: Path) -> Pose2D | None:
+    """The simulated robot's true pose at the end of a capture, if that capture left one."""
+    p = Path(capture_dir) / SIM_STATE
+    if not p.exists():
+        return None
+    d = json.loads(p.read_text(encoding="utf-8"))["robot"]
+    return Pose2D(float(d["x"]), float(d["y"]), float(d["theta"]))
+
+
+def write_sim_state(capture_dir: Path, world) -> None:
+    """Save the simulated world's true robot pose (physics state for the next round)."""
+    if world is None:
+        return
+    p = world.truth_pose
+    doc = {
+        "note": "simulator physics state for the next round; never read by a decision",
+        "robot": {"x": p.x, "y": p.y, "theta": p.theta},
+        "t": world.t,
+    }
+    (Path(capture_dir) / SIM_STATE).write_text(json.dumps(doc, indent=1), encoding="utf-8")
+
+
+def map_end_pose(sfm_dir: Path, camera_offset_m: tuple[float, float]) -> Pose2D:
+    """The robot pose of the map's last photo (where the previous round ended), map frame."""
+    from scenebot.plan.stage import read_map_geometry
+
+    _, centres, _, headings = read_map_geometry(sfm_dir, with_headings=True)
+    if len(centres) == 0:
+        raise ValueError(f"{sfm_dir}: the map has no registered photos")
+    th = float(headings[-1])
+    fwd, left = camera_offset_m
+    c, s = math.cos(th), math.sin(th)
+    x = centres[-1, 0] - fwd * c + left * s
+    y = centres[-1, 1] - fwd * s - left * c
+    return Pose2D(float(x), float(y), th % (2 * math.pi))
+
+
+def _goal_event(clog: CaptureLog, robot, event: str, index: int, goal: dict, **fields):
+    from scenebot.explore import log_event
+
+    log_event(clog, robot, event, goal_index=index, goal=goal, **fields)
+    log.info("goal %d: %s %s", index, event, fields.get("reason", ""))
+
+
+def _go(follower, path: dict, theta: float, index: int):
+    """Follow the planned path when it starts where the robot is, else plan anew."""
+    wp = np.asarray(path["waypoints"], float).reshape(-1, 2)
+    p = follower.pose
+    if len(wp) and math.hypot(wp[0, 0] - p.x, wp[0, 1] - p.y) <= follower.cfg.node_reached_m:
+        return follower.follow(wp, theta, index)
+    return follower.go_to(np.asarray(path["robot_goal"], float), theta, index)
+
+
+def _photo_at(follower, robot, camera, capture_dir: Path, name: str, localize: bool) -> dict:
+    """Take a goal photo; localize it (a fix for the follower when consistent).
+
+    Returns the fields of its ``photo`` record: sensors, ``localization`` (the map-frame
+    robot pose after this photo: the photo's own fix, or the last fix carried by odometry,
+    ``localization_source`` says which) and the localization's inlier count.
+    """
+    reading = robot.sense()
+    path = camera.capture(capture_dir / name)
+    rec = {"image": name, **reading.as_record()}
+    source = "odometry since the last fix"
+    if localize:
+        est = follower.localize_photo(path, reading.odometry)
+        rec["localization_inliers"] = int(est.num_inliers)
+        rec["localization_ok"] = bool(est.ok)
+        if est.ok:
+            source = "this photo"
+    rec["localization"] = follower.pose.as_dict()
+    rec["localization_source"] = source
+    return rec
+
+
+def run_adaptive(
+    cfg: Config,
+    capture_dir: Path,
+    round_index: int,
+    prev_round_dir: Path,
+    progress: bool = True,
+) -> dict:
+    """Capture round ``round_index`` >= 1: visit the previous round's goals, take photos there.
+
+    Args:
+        cfg: the campaign config.
+        capture_dir: ``results/{scene}/round_{r}/capture``.
+        round_index: r (>= 1).
+        prev_round_dir: ``results/{scene}/round_{r-1}`` (map, goals, paths, grid).
+        progress: show a progress bar of photos.
+
+    Returns:
+        The round's summary (goals reached/abandoned/skipped, photos, localizations).
+
+    Raises:
+        FileNotFoundError: an input of the previous round is missing (names it).
+    """
+    from scenebot.capture import archive_previous, make_backend
+    from scenebot.follow import PathFollower
+    from scenebot.localize import make_localizer
+    from scenebot.plan.navgrid import NavGrid
+    from scenebot.plan.path import GridPlanner
+
+    if round_index < 1:
+        raise ValueError("adaptive capture is for rounds >= 1 (round 0 explores)")
+    if cfg.robot == "photos":
+        raise ValueError("robot: photos has no robot to send to goals; set max_rounds: 1")
+    prev = Path(prev_round_dir)
+    need = {
+        "map": prev / "sfm" / "images.bin",
+        "descriptors": prev / "sfm" / "point_descriptors.npz",
+        "goals": prev / "goals.json",
+        "paths": prev / "paths.json",
+        "grid": prev / "navgrid.npz",
+    }
+    for what, p in need.items():
+        if not p.exists():
+            raise FileNotFoundError(
+                f"{p}: the {what} of round {round_index - 1} is missing; build it first "
+                f"(snakemake {p})"
+            )
+    goals_doc = json.loads(need["goals"].read_text(encoding="utf-8"))
+    paths_doc = json.loads(need["paths"].read_text(encoding="utf-8"))
+    fcfg, acfg = cfg.follow, cfg.adaptive
+    per_goal = acfg.circle_photos if acfg.pattern == "circle" else acfg.fan_photos
+    paths = paths_doc.get("paths", [])
+    budget = min(acfg.max_photos, per_goal * len(paths))
+
+    capture_dir = Path(capture_dir)
+    capture_dir.mkdir(parents=True, exist_ok=True)
+    archive_previous(capture_dir)
+    (capture_dir / "images").mkdir(exist_ok=True)
+    (capture_dir / "nav").mkdir(exist_ok=True)
+    robot, camera, world = make_backend(cfg, capture_dir, start=read_sim_state(prev / "capture"))
+    planner = GridPlanner(NavGrid.load(need["grid"]), cfg.plan.simplify_factor)
+    initial = map_end_pose(prev / "sfm", cfg.camera_mount())
+    truth = getattr(robot, "truth_record", None)
+    session = capture_dir / "session.jsonl"
+    outcomes: list[dict] = []
+    inliers: list[int] = []
+    n_photos = 0
+    with (
+        tempfile.TemporaryDirectory(prefix="scenebot-index-") as tmp,
+        CaptureLog(session) as clog,
+        robot,
+    ):
+        localizer = make_localizer(prev / "sfm", cfg.localize, cache_file=Path(tmp) / "i.flann")
+        clog.write(
+            {
+                "type": "session",
+                "t": robot.now,
+                "robot": cfg.robot,
+                "scene": cfg.scene,
+                "round": round_index,
+                "started": dt.datetime.now().isoformat(timespec="seconds"),
+                "map": str(prev / "sfm"),
+                "previous_round_complete": goals_doc.get("complete"),
+                "initial_estimate": initial.as_dict(),
+                "camera": {
+                    "model": "PINHOLE",
+                    "width": cfg.sim.camera.width,
+                    "height": cfg.sim.camera.height,
+                    "focal_px": world.intrinsics.fx if world is not None else None,
+                },
+                "config": cfg.model_dump(
+                    mode="json", include={"world", "sim", "follow", "adaptive", "localize"}
+                ),
+            }
+        )
+        bar = tqdm(total=budget, desc=f"round {round_index} photos", unit="photo",
+                   disable=not progress)  # fmt: skip
+        follower = PathFollower(
+            robot, camera, localizer, planner, fcfg, capture_dir / "nav", clog,
+            truth=truth, initial_pose=initial, trust_initial=False,
+        )  # fmt: skip
+        try:
+            follower.localize_now()  # where the robot really is, before the first path
+            for k, path in enumerate(paths):
+                goal = path.get("goal", {})
+                if n_photos + per_goal > budget:
+                    reason = f"photo budget of the round reached (adaptive.max_photos = {budget})"
+                elif path.get("status") != "ok":
+                    reason = f"not planned: {path.get('message') or path.get('status')}"
+                else:
+                    reason = None
+                if reason is not None:
+                    _goal_event(clog, robot, "goal_skipped", k, goal, reason=reason)
+                    outcomes.append({"goal_index": k, "status": "skipped", "reason": reason})
+                    continue
+                theta = float(goal["theta"])
+                res = _go(follower, path, theta, k)
+                if not res.reached:
+                    _goal_event(clog, robot, "goal_abandoned", k, goal, reason=res.reason,
+                                obstacles=res.obstacles)  # fmt: skip
+                    outcomes.append({"goal_index": k, "status": "abandoned", "reason": res.reason})
+                    continue
+                _goal_event(clog, robot, "goal_reached", k, goal, reason="reached",
+                            robot_goal=path["robot_goal"],
+                            estimate=follower.pose.as_dict(), distance_m=res.distance_m,
+                            localized_at_goal=res.localized_at_goal)  # fmt: skip
+                outcomes.append({"goal_index": k, "status": "reached", "reason": "reached"})
+                for h in goal_headings(theta, acfg):
+                    turn = wrap_angle(h - follower.pose.theta)
+                    if abs(math.degrees(turn)) > fcfg.min_turn_deg:
+                        robot.turn(turn)
+                    name = f"images/r{round_index:03d}_{n_photos:04d}.jpg"
+                    rec = _photo_at(follower, robot, camera, capture_dir, name,
+                                    acfg.localize_photos)  # fmt: skip
+                    record = {"type": "photo", "index": n_photos, **rec, "goal_index": k,
+                              "requested_heading": h % (2 * math.pi)}  # fmt: skip
+                    if truth is not None:
+                        record["truth"] = truth()
+                    clog.write(record)
+                    if rec.get("localization_ok"):
+                        inliers.append(rec["localization_inliers"])
+                    n_photos += 1
+                    bar.update(1)
+        except BaseException as exc:
+            clog.write({"type": "event", "t": robot.now, "event": "error", "error": repr(exc)})
+            raise
+        finally:
+            bar.close()
+            robot.stop()
+            if world is not None:
+                write_sim_state(capture_dir, world)
+        summary = {
+            "round": round_index,
+            "photos": n_photos,
+            "goals": len(paths),
+            "reached": sum(o["status"] == "reached" for o in outcomes),
+            "abandoned": sum(o["status"] == "abandoned" for o in outcomes),
+            "skipped": sum(o["status"] == "skipped" for o in outcomes),
+            "outcomes": outcomes,
+            "nav_photos": len(list((capture_dir / "nav").glob("*.jpg"))),
+            "photos_localized": len(inliers),
+            "localization_inliers_median": float(np.median(inliers)) if inliers else None,
+        }
+        if world is not None:
+            summary["max_penetration_m"] = world.max_penetration_m
+        clog.write({"type": "end", "t": robot.now, "reason": "goals visited", **summary})
+    for img in [*(capture_dir / "images").glob("*.jpg"), *(capture_dir / "nav").glob("*.jpg")]:
+        img.chmod(stat.S_IRUSR | stat.S_IRGRP | stat.S_IROTH)
+    out = capture_dir / "log.jsonl"
+    if out.exists():
+        out.unlink()
+    os.link(session, out)
+    plot_round(out, capture_dir / "trajectory.png", need["grid"], paths_doc)
+    return summary
+
+
+def plot_round(log_path: Path, png: Path, grid_npz: Path, paths_doc: dict) -> Path:
+    """Map-frame picture of an adaptive round: the grid it planned on, the planned paths, the
+    estimated track (fixes and odometry), the photos, obstacles, and each goal's outcome."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from scenebot.capturelog import read_log
+    from scenebot.plan.navgrid import NavGrid
+
+    grid = NavGrid.load(grid_npz)
+    g = grid.geometry
+    ny, nx = g.shape
+    ext = (g.origin_xy[0], g.origin_xy[0] + nx * g.cell_m,
+           g.origin_xy[1], g.origin_xy[1] + ny * g.cell_m)  # fmt: skip
+    records = list(read_log(log_path))
+    fig, ax = plt.subplots(figsize=(8, 8 * ny / max(nx, 1) + 0.6), dpi=110)
+    ax.imshow(np.log1p(grid.score), origin="lower", extent=ext, cmap="Greys",
+              interpolation="nearest")  # fmt: skip
+    red = np.zeros((ny, nx, 4))
+    red[grid.lethal] = (0.8, 0.1, 0.1, 0.2)
+    ax.imshow(red, origin="lower", extent=ext, interpolation="nearest")
+    for p in paths_doc.get("paths", []):
+        if p.get("status") == "ok":
+            wp = np.asarray(p["waypoints"], float)
+            ax.plot(wp[:, 0], wp[:, 1], ":", color="tab:blue", lw=1)
+    track = np.array(
+        [[r["estimate"]["x"], r["estimate"]["y"]] for r in records if "estimate" in r] + [[0, 0]]
+    )[:-1]
+    if len(track):
+        ax.plot(
+            track[:, 0], track[:, 1], "-", color="tab:orange", lw=1.2, label="driven (estimate)"
+        )
+    fixes = np.array([r["localization"]["center"][:2] for r in records
+                      if r.get("event") == "localize"]).reshape(-1, 2)  # fmt: skip
+    if len(fixes):
+        ax.plot(fixes[:, 0], fixes[:, 1], ".", ms=5, color="tab:purple",
+                label=f"visual fixes ({len(fixes)})")  # fmt: skip
+    photos = [r for r in records if r.get("type") == "photo" and r.get("localization")]
+    for r in photos:
+        q = r["localization"]
+        ax.arrow(q["x"], q["y"], 0.2 * math.cos(q["theta"]), 0.2 * math.sin(q["theta"]),
+                 width=0.006, color="tab:green", head_width=0.04, alpha=0.8,
+                 length_includes_head=True)  # fmt: skip
+    ax.plot([], [], color="tab:green", lw=3, label=f"photos ({len(photos)})")
+    obstacles = np.array([[r["estimate"]["x"], r["estimate"]["y"]] for r in records
+                          if r.get("event") == "obstacle"]).reshape(-1, 2)  # fmt: skip
+    if len(obstacles):
+        ax.scatter(obstacles[:, 0], obstacles[:, 1], marker="x", color="red", s=60, zorder=5,
+                   label=f"bumps/stalls ({len(obstacles)})")  # fmt: skip
+    style = {"goal_reached": ("*", "gold"), "goal_abandoned": ("X", "red"),
+             "goal_skipped": ("X", "grey")}  # fmt: skip
+    for ev, (marker, color) in style.items():
+        sel = [r["goal"] for r in records if r.get("event") == ev and "x" in r.get("goal", {})]
+        pts = np.array([[q["x"], q["y"]] for q in sel]).reshape(-1, 2)
+        if len(pts):
+            ax.scatter(pts[:, 0], pts[:, 1], marker=marker, s=160, color=color, ec="k",
+                       zorder=6, label=f"{ev.replace('_', ' ')} ({len(pts)})")  # fmt: skip
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, map frame)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{Path(log_path).parent.parent.name}: adaptive capture, map frame")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png)
+    plt.close(fig)
+    return Path(png)

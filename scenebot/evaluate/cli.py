@@ -1,0 +1,111 @@
+"""Command line of the evaluation: ``python -m scenebot.evaluate {observable,evaluate} ...``.
+
+Meant to be merged into ``scenebot`` 's CLI (:func:`add_parsers`); until then it runs on its
+own. ``--params`` takes the workflow's stage parameters (``section_json`` of the campaign
+config), optionally with an ``evaluate`` section; ``--config`` a campaign YAML file.
+
+Examples::
+
+    python -m scenebot.evaluate observable --config config.yaml \\
+        --out results/office/eval/observable_surface.npz
+    python -m scenebot.evaluate evaluate --config config.yaml --scene-dir results/office \\
+        --round 0 --dense results/office/final/dense/fused.ply
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from scenebot.evaluate.config import EvaluateConfig
+
+
+def load_settings(args) -> tuple[object, EvaluateConfig]:
+    """(campaign Config, EvaluateConfig) from ``--params`` JSON or ``--config`` YAML."""
+    import yaml
+
+    from scenebot.config import ConfigError, validate_config
+
+    if getattr(args, "params", None):
+        data, source = json.loads(args.params), "stage parameters"
+    else:
+        path = Path(args.config)
+        if not path.is_file():
+            raise ConfigError(
+                f"config file {path} not found (copy config.yaml from the repository)"
+            )
+        data, source = yaml.safe_load(path.read_text()) or {}, str(path)
+    ev = data.pop("evaluate", None) or {}
+    cfg = validate_config(data, source)
+    got = getattr(cfg, "evaluate", None)  # once the lead merges the section into Config
+    ecfg = got if isinstance(got, EvaluateConfig) and not ev else EvaluateConfig(**ev)
+    return cfg, ecfg
+
+
+def cmd_observable(args) -> int:
+    from scenebot.evaluate.stage import ObservableOutputs, run_observable
+
+    cfg, ecfg = load_settings(args)
+    out = Path(args.out)
+    png = Path(args.png) if args.png else out.with_suffix(".png")
+    print(json.dumps(run_observable(cfg, ObservableOutputs(out, png), ecfg), default=str))
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from scenebot.evaluate.stage import EvaluateInputs, EvaluateOutputs, main_summary, run
+
+    cfg, ecfg = load_settings(args)
+    scene_dir = Path(args.scene_dir)
+    rdir = scene_dir / f"round_{args.round:03d}"
+    caps = [scene_dir / f"round_{k:03d}" / "capture" for k in range(args.round + 1)]
+    if cfg.robot == "photos" and args.round == 0:
+        caps = [c for c in caps if (c / "log.jsonl").is_file()]
+    inputs = EvaluateInputs(
+        sfm_dir=rdir / "sfm",
+        captures=caps,
+        dense_cloud=Path(args.dense) if args.dense else None,
+        observable=Path(args.observable)
+        if args.observable
+        else scene_dir / "eval" / "observable_surface.npz",
+        round_index=args.round,
+    )
+    out = Path(args.out) if args.out else rdir / "evaluation.json"
+    ev = run(cfg, inputs, EvaluateOutputs(out, out.with_suffix(".png")), ecfg)
+    print(main_summary(ev))
+    return 0
+
+
+def add_parsers(sub) -> None:
+    """Add the ``observable`` and ``evaluate`` sub-commands to an argparse sub-parser set."""
+    o = sub.add_parser("observable", help="observable surface of the simulated scene (cached)")
+    e = sub.add_parser("evaluate", help="one round against the simulator's truth")
+    for sp in (o, e):
+        sp.add_argument("--config", default="config.yaml", help="campaign config (YAML)")
+        sp.add_argument("--params", help="stage parameters as JSON (used by the workflow)")
+    o.add_argument("--out", required=True, help="eval/observable_surface.npz")
+    o.add_argument("--png", help="its picture (default: beside it, .png)")
+    o.set_defaults(func=cmd_observable)
+    e.add_argument("--scene-dir", required=True, help="results/<scene>")
+    e.add_argument("--round", type=int, required=True)
+    e.add_argument("--dense", help="fused cloud (PLY, robot frame) to evaluate")
+    e.add_argument("--observable", help="observable-surface cache (default: <scene>/eval/...)")
+    e.add_argument("--out", help="evaluation.json (default: <scene>/round_XXX/evaluation.json)")
+    e.set_defaults(func=cmd_evaluate)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from scenebot.config import ConfigError
+
+    ap = argparse.ArgumentParser(prog="python -m scenebot.evaluate", description=__doc__)
+    add_parsers(ap.add_subparsers(dest="command", required=True))
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except (ConfigError, ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2

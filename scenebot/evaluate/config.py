@@ -1,0 +1,62 @@
+"""Settings of the ground-truth evaluation (simulated scenes only).
+
+Kept free of heavy imports: the workflow loads every stage's config at start.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+
+class EvaluateConfig(BaseModel):
+    """The evaluation of a round against the simulator's true scene (evaluation only).
+
+    The observable surface (what completeness counts) is the part of the true mesh that a
+    camera at the robot's camera height sees from some reachable pose; reachable poses are
+    sampled on a grid over the free space connected to the start (the simulator's obstacle
+    map, robot radius), each with several headings.
+    """
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    grid_step_m: float = Field(
+        0.25, gt=0.01, description="Spacing (m) of the robot positions sampled in free space."
+    )
+    headings: int = Field(
+        8, ge=1, le=72, description="Camera headings per sampled position (evenly spaced)."
+    )
+    sample_spacing_m: float = Field(
+        0.02,
+        gt=0.001,
+        description="Mean spacing (m) of the points sampled on the true surface (each "
+        "triangle gets at least one, weighted by its area).",
+    )
+    max_range_m: float | None = Field(
+        None,
+        gt=0,
+        description="Surface farther than this (m) from the camera is not seen; null: no limit.",
+    )
+    max_incidence_deg: float = Field(
+        85.0,
+        gt=0,
+        le=90,
+        description="Surface seen more obliquely than this (deg from its normal) is not "
+        "counted as seen (90: any angle).",
+    )
+    thresholds_m: list[float] = Field(
+        [0.01, 0.02, 0.05], description="Distances (m) of accuracy and completeness."
+    )
+    max_cloud_points: int = Field(
+        2_000_000,
+        ge=1000,
+        description="A denser fused cloud is randomly subsampled (seeded) to this many points.",
+    )
+    seed: int = Field(0, description="Seed of the surface sampling and cloud subsampling.")
+    plots: bool = Field(True, description="Write the PNG pictures.")
+
+    @field_validator("thresholds_m")
+    @classmethod
+    def _positive(cls, v: list[float]) -> list[float]:
+        if not v or any(t <= 0 for t in v):
+            raise ValueError("evaluate.thresholds_m must be a non-empty list of positive metres")
+        return sorted(v)

@@ -1,0 +1,319 @@
+"""Metrics of a round against the simulator's truth (evaluation only).
+
+* :func:`robot_to_world`: the similarity that maps the map's robot frame onto the world frame,
+  fitted (Umeyama, :func:`scenebot.sfm.evaluate.umeyama`) to the SfM camera centres and the
+  capture logs' true centres. Nothing but the evaluation uses it.
+* :func:`dense_metrics`: accuracy and completeness of a fused cloud at 1, 2, 5 cm against the
+  true mesh and its observable surface, with area-weighted completeness (the samples of
+  :mod:`scenebot.evaluate.observable` carry areas).
+* :func:`capture_stats`: photos per round and goal outcomes from the capture logs.
+* :func:`localization_accuracy`: visual-localization estimates logged with photos vs truth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.capturelog import read_log
+
+GOAL_EVENTS = ("goal_reached", "goal_abandoned", "goal_skipped")
+
+
+class EvaluationError(ValueError):
+    """Inputs of the evaluation are missing or inconsistent; the message names the file."""
+
+
+@dataclass
+class Similarity:
+    """``x_world = scale * R @ x_robot + t`` and its fit.
+
+    Attributes:
+        scale: world metres per map unit.
+        R: (3, 3) rotation.
+        t: (3,) translation (m).
+        photos: photos used in the fit.
+        residual_m: statistics of the fitted centres' distances to the true ones (m).
+    """
+
+    scale: float
+    R: np.ndarray
+    t: np.ndarray
+    photos: int
+    residual_m: dict
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """Map (N, 3) robot-frame points to the world frame."""
+        return self.scale * np.asarray(x, np.float64) @ self.R.T + self.t
+
+    def as_dict(self) -> dict:
+        return {
+            "scale": self.scale,
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+            "photos": self.photos,
+            "residual_m": self.residual_m,
+        }
+
+
+def _stats(x: np.ndarray) -> dict[str, float]:
+    x = np.asarray(x, np.float64)
+    if x.size == 0:
+        return {}
+    return {
+        "median": float(np.median(x)),
+        "mean": float(np.mean(x)),
+        "p90": float(np.percentile(x, 90)),
+        "max": float(np.max(x)),
+    }
+
+
+def _log_path(capture: Path) -> Path:
+    capture = Path(capture)
+    return capture / "log.jsonl" if capture.is_dir() else capture
+
+
+def true_centers(captures: Sequence[Path]) -> dict[str, np.ndarray]:
+    """Photo file name (basename) -> true camera centre (3,) from the logs' ``truth``."""
+    out: dict[str, np.ndarray] = {}
+    for cap in captures:
+        path = _log_path(cap)
+        if not path.is_file():
+            raise EvaluationError(f"capture log {path} not found (run the capture stage first)")
+        for rec in read_log(path):
+            if rec.get("type") == "photo" and rec.get("truth", {}).get("center") is not None:
+                out[Path(rec["image"]).name] = np.asarray(rec["truth"]["center"], np.float64)
+    return out
+
+
+def robot_to_world(sfm_dir: Path, captures: Sequence[Path]) -> Similarity:
+    """Fit the robot-frame -> world similarity to the registered photos' true centres.
+
+    Args:
+        sfm_dir: a COLMAP model folder in the robot frame (``round_{r}/sfm``).
+        captures: capture folders (or their ``log.jsonl``) of the photos in the model.
+
+    Raises:
+        EvaluationError: the model is missing, or fewer than 3 registered photos have truth.
+    """
+    import pycolmap
+
+    from scenebot.sfm.evaluate import umeyama
+
+    sfm_dir = Path(sfm_dir)
+    if not (sfm_dir / "images.bin").is_file():
+        raise EvaluationError(f"no COLMAP model in {sfm_dir} (images.bin missing)")
+    rec = pycolmap.Reconstruction(str(sfm_dir))
+    truth = true_centers(captures)
+    est, tru = [], []
+    for iid in rec.reg_image_ids():
+        im = rec.image(iid)
+        c = truth.get(Path(im.name).name)
+        if c is not None:
+            est.append(im.projection_center())
+            tru.append(c)
+    if len(est) < 3:
+        raise EvaluationError(
+            f"only {len(est)} registered photos of {sfm_dir} have a true pose in the capture "
+            "logs (need 3): evaluation needs a simulated capture"
+        )
+    est, tru = np.array(est), np.array(tru)
+    s, R, t = umeyama(est, tru)
+    res = np.linalg.norm(s * est @ R.T + t - tru, axis=1)
+    return Similarity(float(s), R, t, len(est), _stats(res))
+
+
+def weighted_cloud_metrics(
+    points: np.ndarray,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    reference: np.ndarray,
+    weights: np.ndarray | None = None,
+    thresholds_m: Sequence[float] = (0.01, 0.02, 0.05),
+) -> dict[str, dict[str, float]]:
+    """Accuracy, area-weighted completeness and F-score of a cloud (world frame).
+
+    Accuracy at tau: fraction of the cloud's points within tau of the true mesh (exact
+    point-to-triangle distance, :func:`scenebot.dense.evaluate.mesh_raycaster`). Completeness
+    at tau: fraction of the reference *area* (sum of ``weights``) whose samples have a cloud
+    point within tau. Same layout as :func:`scenebot.dense.evaluate.cloud_metrics`, which
+    this equals for uniform weights.
+
+    Args:
+        points: (N, 3) cloud (m).
+        vertices: (V, 3) true mesh (m).
+        triangles: (T, 3) indices.
+        reference: (M, 3) samples of the observable surface (m).
+        weights: (M,) their areas (m^2); None: uniform.
+        thresholds_m: distances (m).
+
+    Returns:
+        ``{"1cm": {"accuracy", "completeness", "fscore"}, ..., "median_error_m": {...}}``.
+    """
+    import open3d as o3d
+    from scipy.spatial import cKDTree
+
+    from scenebot.dense.evaluate import mesh_raycaster
+
+    points = np.asarray(points, np.float64)
+    if len(points) == 0:
+        raise EvaluationError("the dense point cloud is empty")
+    if len(reference) == 0:
+        raise EvaluationError("the observable surface has no samples")
+    w = np.ones(len(reference)) if weights is None else np.asarray(weights, np.float64)
+    rc = mesh_raycaster(vertices, triangles)
+    d_acc = rc.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+    d_comp, _ = cKDTree(points).query(reference, k=1, workers=-1)
+    out: dict[str, dict[str, float]] = {}
+    for tau in thresholds_m:
+        a = float(np.mean(d_acc < tau))
+        c = float(np.sum(w * (d_comp < tau)) / np.sum(w))
+        f = 2 * a * c / (a + c) if a + c > 0 else 0.0
+        out[f"{round(tau * 100, 1):g}cm"] = {"accuracy": a, "completeness": c, "fscore": f}
+    order = np.argsort(d_comp)
+    cw = np.cumsum(w[order])
+    out["median_error_m"] = {
+        "accuracy": float(np.median(d_acc)),
+        "completeness": float(d_comp[order][np.searchsorted(cw, 0.5 * cw[-1])]),
+    }
+    return out
+
+
+def read_cloud(path: Path, max_points: int, seed: int = 0) -> np.ndarray:
+    """(N, 3) points of a PLY cloud, randomly subsampled (seeded) to ``max_points``."""
+    import open3d as o3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise EvaluationError(f"dense cloud {path} not found (run the dense stage first)")
+    pts = np.asarray(o3d.io.read_point_cloud(str(path)).points, np.float64)
+    if len(pts) > max_points:
+        pts = pts[np.random.default_rng(seed).choice(len(pts), max_points, replace=False)]
+    return pts
+
+
+def capture_stats(captures: Sequence[Path]) -> dict:
+    """Photos per round and goal outcomes (events ``goal_reached``/``_abandoned``/``_skipped``).
+
+    Args:
+        captures: capture folders (or ``log.jsonl`` paths), one per round, in order.
+
+    Returns:
+        ``{"photos_per_round": [...], "photos_total", "goals_per_round": [{"reached", ...}],
+        "goals": {"reached", "abandoned", "skipped", "attempted", "reached_fraction"},
+        "has_truth": bool}``; rounds whose logs have no goal events count 0 (round 0 has none).
+    """
+    photos, goals, truth = [], [], False
+    for cap in captures:
+        path = _log_path(cap)
+        if not path.is_file():
+            raise EvaluationError(f"capture log {path} not found (run the capture stage first)")
+        n = 0
+        g = {e: 0 for e in GOAL_EVENTS}
+        for rec in read_log(path):
+            if rec.get("type") == "photo":
+                n += 1
+                truth |= "truth" in rec
+            elif rec.get("type") == "event" and rec.get("event") in GOAL_EVENTS:
+                g[rec["event"]] += 1
+        photos.append(n)
+        goals.append({k.removeprefix("goal_"): v for k, v in g.items()})
+    tot = {k: sum(g[k] for g in goals) for k in ("reached", "abandoned", "skipped")}
+    attempted = tot["reached"] + tot["abandoned"]
+    tot["attempted"] = attempted
+    tot["reached_fraction"] = tot["reached"] / attempted if attempted else None
+    return {
+        "photos_per_round": photos,
+        "photos_total": int(sum(photos)),
+        "goals_per_round": goals,
+        "goals": tot,
+        "has_truth": truth,
+    }
+
+
+def _loc_error(loc: dict, tr: dict, sim: Similarity) -> tuple[float, float | None] | None:
+    """(position error (m), heading error (rad) or None) of one map-frame estimate."""
+    if "center" in loc and "center" in tr:
+        est = sim.apply(np.asarray(loc["center"], float)[None])[0]
+        err = float(np.linalg.norm(est - np.asarray(tr["center"], float)))
+        h_err = None
+        if "R_cam_from_world" in loc and "R_cam_from_world" in tr:
+            # the camera's forward axis (row 2 of R_cam_from_world) in the world frame
+            fe = sim.R @ np.asarray(loc["R_cam_from_world"], float).reshape(3, 3)[2]
+            ft = np.asarray(tr["R_cam_from_world"], float).reshape(3, 3)[2]
+            h_err = math.atan2(fe[1], fe[0]) - math.atan2(ft[1], ft[0])
+        return err, h_err
+    if {"x", "y"} <= loc.keys() and "robot" in tr:
+        est = sim.apply(np.array([[loc["x"], loc["y"], 0.0]]))[0][:2]
+        err = float(np.hypot(*(est - [tr["robot"]["x"], tr["robot"]["y"]])))
+        h_err = None
+        if "theta" in loc:
+            h_err = loc["theta"] + math.atan2(sim.R[1, 0], sim.R[0, 0]) - tr["robot"]["theta"]
+        return err, h_err
+    return None
+
+
+def _summary(errs: list[tuple[str, float, float | None]]) -> dict:
+    if not errs:
+        return {"count": 0}
+    pos = np.array([e[1] for e in errs])
+    head = np.array([abs(math.degrees(math.remainder(e[2], 2 * math.pi))) for e in errs
+                     if e[2] is not None])  # fmt: skip
+    return {
+        "count": len(errs),
+        "position_error_m": _stats(pos),
+        "heading_error_deg": _stats(head),
+        "per_estimate": [
+            {"image": n, "position_error_m": p,
+             "heading_error_deg": None if h is None
+             else abs(math.degrees(math.remainder(h, 2 * math.pi)))}
+            for n, p, h in errs
+        ],
+    }  # fmt: skip
+
+
+def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
+    """Visual-localization estimates in the capture logs (map frame) against the true poses.
+
+    Two kinds of records are read (adaptive rounds; see :mod:`scenebot.adaptive`):
+
+    * ``fixes``: events ``localize`` (a successful visual fix while following a path); their
+      ``localization`` is a camera pose (``center``, ``R_cam_from_world``), compared with the
+      event's ``truth`` camera pose: the paper's Fig. 5 localization accuracy.
+    * ``photos``: photo records whose ``localization_source`` is ``this photo`` (or absent):
+      the robot pose (``x``, ``y``, ``theta``) estimated from the photo, compared with
+      ``truth.robot``.
+
+    Estimates are mapped to the world with ``sim`` (robot frame -> world). Events
+    ``localize_failed`` are counted.
+
+    Returns:
+        ``{"fixes": {...}, "photos": {...}, "failed_fixes": n}``, each with ``count``,
+        ``position_error_m`` / ``heading_error_deg`` statistics and ``per_estimate``.
+    """
+    fixes, photos, failed = [], [], 0
+    for cap in captures:
+        path = _log_path(cap)
+        if not path.is_file():
+            continue
+        for rec in read_log(path):
+            kind, event = rec.get("type"), rec.get("event")
+            if kind == "event" and event == "localize_failed":
+                failed += 1
+                continue
+            loc, tr = rec.get("localization"), rec.get("truth")
+            if not isinstance(loc, dict) or not isinstance(tr, dict):
+                continue
+            if kind == "event" and event == "localize" and loc.get("ok", True):
+                got, into = _loc_error(loc, tr, sim), fixes
+            elif kind == "photo" and rec.get("localization_source", "this photo") == "this photo":
+                got, into = _loc_error(loc, tr, sim), photos
+            else:
+                continue
+            if got is not None:
+                into.append((str(rec.get("image", "")), got[0], got[1]))
+    return {"fixes": _summary(fixes), "photos": _summary(photos), "failed_fixes": failed}

@@ -1,0 +1,344 @@
+"""The evaluate stage: one round's figures against the simulator's truth (evaluation only).
+
+Entry points:
+
+* :func:`run_observable` (rule ``observable``, once per scene): the observable surface of
+  the true scene, ``results/{scene}/eval/observable_surface.npz`` + ``.png``.
+* :func:`run` (rule ``evaluate``, per round): ``results/{scene}/round_{r}/evaluation.json``
+  and ``evaluation.png`` with photos per round, goals reached, SfM accuracy (from
+  ``round_{r}/sfm/accuracy.json``), visual-localization accuracy of logged estimates, and,
+  when a dense cloud is given, its accuracy and completeness at 1, 2, 5 cm against the
+  observable surface.
+
+The true scene and poses are read only here; nothing a stage decides depends on them. For a
+robot without truth (``nxt``, ``photos``) only the photo and goal counts are written.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.evaluate.config import EvaluateConfig
+from scenebot.evaluate.metrics import (
+    EvaluationError,
+    capture_stats,
+    localization_accuracy,
+    read_cloud,
+    robot_to_world,
+    weighted_cloud_metrics,
+)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class EvaluateInputs:
+    """Inputs of one round's evaluation.
+
+    Attributes:
+        sfm_dir: the round's model folder ``round_{r}/sfm`` (robot frame), with
+            ``accuracy.json`` when the sfm stage evaluated it.
+        captures: capture folders (or ``log.jsonl`` files) of rounds 0..r, in order.
+        dense_cloud: fused cloud (PLY, robot frame) to evaluate, or None.
+        observable: the observable-surface cache (``eval/observable_surface.npz``); computed
+            and written when missing or stale.
+        round_index: the round; None: parsed from ``sfm_dir`` (``round_XXX``).
+    """
+
+    sfm_dir: Path
+    captures: list[Path]
+    dense_cloud: Path | None = None
+    observable: Path | None = None
+    round_index: int | None = None
+
+
+@dataclass
+class EvaluateOutputs:
+    """``json``: ``round_{r}/evaluation.json``; ``png``: its picture (None: no picture)."""
+
+    json: Path
+    png: Path | None = None
+
+
+@dataclass
+class ObservableOutputs:
+    """``npz``: the observable surface; ``png``: its top-down picture (None: none)."""
+
+    npz: Path
+    png: Path | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def _evaluate_cfg(cfg, ecfg: EvaluateConfig | None) -> EvaluateConfig:
+    if ecfg is not None:
+        return ecfg
+    got = getattr(cfg, "evaluate", None)
+    return got if isinstance(got, EvaluateConfig) else EvaluateConfig()
+
+
+def _scene(cfg, scene):
+    if scene is not None:
+        return scene
+    from scenebot.scene.loader import load_world_scene
+
+    return load_world_scene(cfg.world)
+
+
+def has_scene_truth(cfg) -> bool:
+    """Whether the campaign's robot is simulated (the true scene is known)."""
+    return cfg.robot in ("sim", "nxt-emulated")
+
+
+def run_observable(cfg, outputs: ObservableOutputs, ecfg: EvaluateConfig | None = None,
+                   scene=None) -> dict:  # fmt: skip
+    """Compute (or reuse the cached) observable surface of the campaign's simulated scene.
+
+    Args:
+        cfg: the campaign :class:`~scenebot.config.Config` (``world``, ``sim``).
+        outputs: where to write it.
+        ecfg: evaluation settings; None: ``cfg.evaluate`` if present, else defaults.
+        scene: the true scene; None: loaded from ``cfg.world``.
+
+    Returns:
+        The summary (areas, counts, whether the cache was reused, seconds).
+
+    Raises:
+        EvaluationError: the campaign's robot has no simulated scene.
+    """
+    from scenebot.evaluate.observable import load_or_compute, plot_observable
+
+    if not has_scene_truth(cfg):
+        raise EvaluationError(
+            f"robot {cfg.robot!r} has no true scene: the observable surface needs the simulator "
+            "(robot: sim or nxt-emulated)"
+        )
+    ecfg = _evaluate_cfg(cfg, ecfg)
+    t0 = time.perf_counter()
+    sc = _scene(cfg, scene)
+    surf, cached = load_or_compute(outputs.npz, sc, cfg.sim, ecfg, world_cfg=cfg.world)
+    if outputs.png is not None and ecfg.plots:
+        plot_observable(surf, outputs.png, f"scene {sc.name!r}: observable surface")
+    return {**surf.summary(), "cached": cached, "seconds": time.perf_counter() - t0}
+
+
+def _round_of(sfm_dir: Path) -> int | None:
+    for part in reversed(Path(sfm_dir).parts):
+        m = re.fullmatch(r"round_(\d+)", part)
+        if m:
+            return int(m.group(1))
+    return None
+
+
+def _sfm_summary(sfm_dir: Path) -> dict | None:
+    path = Path(sfm_dir) / "accuracy.json"
+    if not path.is_file():
+        return None
+    acc = json.loads(path.read_text())
+    return {k: v for k, v in acc.items() if k != "per_photo"} | {
+        "per_photo_position_error_m": [p["position_error_m"] for p in acc.get("per_photo", [])],
+        "per_photo_heading_error_deg": [p["heading_error_deg"] for p in acc.get("per_photo", [])],
+    }
+
+
+def run(
+    cfg,
+    inputs: EvaluateInputs,
+    outputs: EvaluateOutputs,
+    ecfg: EvaluateConfig | None = None,
+    scene=None,
+) -> dict:
+    """Evaluate one round and write ``evaluation.json`` (+ PNG).
+
+    Args:
+        cfg: the campaign :class:`~scenebot.config.Config` (``robot``, ``world``, ``sim``).
+        inputs: see :class:`EvaluateInputs`.
+        outputs: see :class:`EvaluateOutputs`.
+        ecfg: evaluation settings; None: ``cfg.evaluate`` if present, else defaults.
+        scene: the true scene; None: loaded from ``cfg.world`` (simulated robots only).
+
+    Returns:
+        What ``evaluation.json`` holds: ``round``, ``capture`` (photos per round, goals),
+        ``sfm`` (accuracy summary or None), ``alignment`` (robot frame -> world),
+        ``localization``, ``observable`` (areas), ``dense`` (metrics per threshold or None),
+        ``notes``.
+    """
+    from scenebot.evaluate.observable import load_or_compute
+
+    ecfg = _evaluate_cfg(cfg, ecfg)
+    t0 = time.perf_counter()
+    r = inputs.round_index if inputs.round_index is not None else _round_of(inputs.sfm_dir)
+    caps = [Path(c) for c in inputs.captures]
+    stats = capture_stats(caps)
+    out: dict = {
+        "round": r,
+        "scene": getattr(cfg, "scene", None),
+        "capture": stats,
+        "sfm": _sfm_summary(inputs.sfm_dir),
+        "alignment": None,
+        "localization": None,
+        "observable": None,
+        "dense": None,
+        "notes": [],
+    }
+    truth = has_scene_truth(cfg) and stats["has_truth"]
+    if not truth:
+        out["notes"].append("no true poses in the capture logs: truth-based metrics skipped")
+    sim = None
+    if truth:
+        try:
+            sim = robot_to_world(inputs.sfm_dir, caps)
+            out["alignment"] = sim.as_dict()
+            out["localization"] = localization_accuracy(caps, sim)
+        except EvaluationError as exc:
+            out["notes"].append(str(exc))
+    surf = cloud = None
+    if truth and inputs.dense_cloud is not None:
+        if sim is None:
+            out["notes"].append("dense cloud not evaluated: no robot->world alignment")
+        else:
+            sc = _scene(cfg, scene)
+            surf, cached = load_or_compute(
+                inputs.observable, sc, cfg.sim, ecfg, world_cfg=cfg.world
+            )
+            obs_file = str(inputs.observable) if inputs.observable else None
+            out["observable"] = {**surf.summary(), "cached": cached, "file": obs_file}
+            cloud = sim.apply(read_cloud(inputs.dense_cloud, ecfg.max_cloud_points, ecfg.seed))
+            m = weighted_cloud_metrics(
+                cloud, sc.vertices, sc.triangles, surf.observable_points,
+                surf.observable_weights, ecfg.thresholds_m,
+            )  # fmt: skip
+            out["dense"] = {"cloud": str(inputs.dense_cloud), "points": len(cloud), **m}
+    elif inputs.dense_cloud is None:
+        out["notes"].append("no dense cloud given: dense metrics skipped")
+    out["seconds"] = time.perf_counter() - t0
+    outputs.json.parent.mkdir(parents=True, exist_ok=True)
+    outputs.json.write_text(json.dumps(out, indent=1, default=_jsonable) + "\n")
+    if outputs.png is not None and ecfg.plots:
+        plot_evaluation(out, outputs.png, surf, cloud)
+    return out
+
+
+def _jsonable(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"cannot write {type(o).__name__} to evaluation.json")
+
+
+def plot_evaluation(ev: dict, png: Path, surf=None, cloud: np.ndarray | None = None) -> Path:
+    """The round's picture: SfM error histograms (paper Fig. 5b style), photos and goals per
+    round, dense accuracy/completeness per threshold, and a top-down completeness map."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(12, 9), dpi=100)
+    sfm = ev.get("sfm") or {}
+    ax = axes[0, 0]
+    pe = np.array(sfm.get("per_photo_position_error_m", [])) * 100
+    if pe.size:
+        ax.hist(pe, bins=30, color="tab:blue", alpha=0.8)
+        ax.axvline(np.median(pe), color="k", ls="--", label=f"median {np.median(pe):.2f} cm")
+        ax.legend()
+    else:
+        ax.text(0.5, 0.5, "no SfM accuracy (accuracy.json)", ha="center", transform=ax.transAxes)
+    ax.set_xlabel("camera position error (cm)")
+    ax.set_ylabel("photos")
+    ax.set_title(f"SfM accuracy, round {ev.get('round')}: {sfm.get('evaluated', 0)} photos")
+    ax = axes[0, 1]
+    cap = ev["capture"]
+    rounds = np.arange(len(cap["photos_per_round"]))
+    ax.bar(rounds - 0.2, cap["photos_per_round"], 0.4, label="photos", color="tab:gray")
+    ax.set_xlabel("round")
+    ax.set_ylabel("photos")
+    ax2 = ax.twinx()
+    g = cap["goals_per_round"]
+    ax2.bar(rounds + 0.2, [x["reached"] for x in g], 0.4, color="tab:green", label="goals reached")
+    ax2.bar(rounds + 0.2, [x["abandoned"] for x in g], 0.4, bottom=[x["reached"] for x in g],
+            color="tab:red", label="abandoned")  # fmt: skip
+    ax2.set_ylabel("goals")
+    h1, l1 = ax.get_legend_handles_labels()
+    h2, l2 = ax2.get_legend_handles_labels()
+    ax.legend(h1 + h2, l1 + l2, loc="upper right")
+    ax.set_xticks(rounds)
+    ax.set_title(f"capture: {cap['photos_total']} photos in all")
+    ax = axes[1, 0]
+    dense = ev.get("dense")
+    if dense:
+        taus = [k for k in dense if k.endswith("cm")]
+        x = np.arange(len(taus))
+        acc = [100 * dense[k]["accuracy"] for k in taus]
+        comp = [100 * dense[k]["completeness"] for k in taus]
+        ax.bar(x - 0.2, acc, 0.4, label="accuracy")
+        ax.bar(x + 0.2, comp, 0.4, label="completeness (observable area)")
+        for xi, a, c in zip(x, acc, comp, strict=True):
+            ax.text(xi - 0.2, a + 1, f"{a:.1f}", ha="center", fontsize=8)
+            ax.text(xi + 0.2, c + 1, f"{c:.1f}", ha="center", fontsize=8)
+        ax.set_xticks(x, taus)
+        ax.set_ylim(0, 105)
+        ax.set_ylabel("%")
+        ax.legend(loc="lower right")
+        ax.set_title(f"dense cloud: {dense['points']} points")
+    else:
+        ax.text(0.5, 0.5, "no dense cloud evaluated", ha="center", transform=ax.transAxes)
+        ax.set_axis_off()
+    ax = axes[1, 1]
+    if surf is not None and cloud is not None and len(cloud):
+        from scipy.spatial import cKDTree
+
+        p = surf.observable_points
+        d, _ = cKDTree(cloud).query(p, k=1, distance_upper_bound=0.1, workers=-1)
+        order = np.argsort(p[:, 2])  # higher surfaces drawn last
+        sc = ax.scatter(p[order, 0], p[order, 1], c=np.minimum(d[order], 0.1) * 100, s=0.3,
+                        cmap="RdYlGn_r", vmin=0, vmax=5, lw=0)  # fmt: skip
+        fig.colorbar(sc, ax=ax, fraction=0.04, label="distance to the cloud (cm)")
+        ax.set_aspect("equal")
+        ax.set_title("observable surface, top-down: distance to the nearest cloud point")
+        ax.set_xlabel("x (m, world)")
+    else:
+        ax.set_axis_off()
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png)
+    plt.close(fig)
+    return png
+
+
+def main_summary(ev: dict) -> str:
+    """One line per figure, for logs and the CLI."""
+    lines = [f"round {ev['round']}: {ev['capture']['photos_total']} photos"]
+    g = ev["capture"]["goals"]
+    if g["attempted"]:
+        lines.append(f"goals reached {g['reached']}/{g['attempted']}")
+    if ev.get("sfm") and "position_error_m" in ev["sfm"]:
+        lines.append(
+            f"sfm median position error {100 * ev['sfm']['position_error_m']['median']:.2f} cm"
+        )
+    fixes = (ev.get("localization") or {}).get("fixes", {})
+    if fixes.get("count"):
+        med = 100 * fixes["position_error_m"]["median"]
+        lines.append(f"{fixes['count']} visual fixes, median error {med:.2f} cm")
+    if ev.get("dense"):
+        d = ev["dense"]
+        lines.append(
+            "dense " + ", ".join(
+                f"{k}: acc {100 * v['accuracy']:.1f}% comp {100 * v['completeness']:.1f}%"
+                for k, v in d.items() if k.endswith("cm")
+            )
+        )  # fmt: skip
+    if not math.isnan(ev.get("seconds", float("nan"))):
+        lines.append(f"({ev['seconds']:.1f} s)")
+    return "; ".join(lines)

@@ -1,0 +1,203 @@
+"""Dense metrics against the observable surface, the robot->world similarity, the stage."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import open3d as o3d
+import pytest
+from conftest import box_room
+from scipy.spatial.transform import Rotation
+
+from scenebot.capturelog import CaptureLog
+from scenebot.config import Config
+from scenebot.dense.evaluate import cloud_metrics
+from scenebot.evaluate.config import EvaluateConfig
+from scenebot.evaluate.metrics import (
+    EvaluationError,
+    capture_stats,
+    localization_accuracy,
+    robot_to_world,
+    weighted_cloud_metrics,
+)
+from scenebot.evaluate.observable import observable_surface
+from scenebot.evaluate.stage import EvaluateInputs, EvaluateOutputs, run
+from scenebot.score.synthetic import default_intrinsics, write_colmap_model
+from scenebot.sim.renderer import look_rotation
+
+ECFG = EvaluateConfig(grid_step_m=0.4, headings=6, sample_spacing_m=0.05)
+# the map's robot frame: world = S * R @ robot + T (a yawed, scaled, shifted frame)
+S_TRUE = 1.25
+R_TRUE = Rotation.from_euler("z", 35, degrees=True).as_matrix()
+T_TRUE = np.array([2.0, 1.5, 0.35])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return box_room(obstacles=[((1.0, 1.0, 0.0), (1.6, 1.6, 0.5))], start=(3.0, 1.5, 0.0))
+
+
+@pytest.fixture(scope="module")
+def surf(scene):
+    return observable_surface(scene, Config().sim, ECFG)
+
+
+def to_robot(x):
+    return (np.asarray(x) - T_TRUE) @ R_TRUE / S_TRUE
+
+
+def write_round(tmp_path, n_photos=8, goals=()):
+    """A round_000 with a capture log (truth) and a COLMAP model in the robot frame."""
+    cap = tmp_path / "round_000" / "capture"
+    rng = np.random.default_rng(0)
+    centers_w = np.c_[rng.uniform(2.2, 3.6, n_photos), rng.uniform(0.6, 2.4, n_photos),
+                      np.full(n_photos, 0.35)]  # fmt: skip
+    heads = rng.uniform(0, 2 * np.pi, n_photos)
+    Rw = np.array([look_rotation(h) for h in heads])
+    with CaptureLog(cap / "log.jsonl") as log:
+        log.write({"type": "session", "robot": "sim"})
+        for k in range(n_photos):
+            log.write({"type": "photo", "index": k, "image": f"images/im{k:04d}.jpg",
+                       "odometry": {"x": 0, "y": 0, "theta": 0},
+                       "truth": {"center": centers_w[k].tolist(),
+                                 "R_cam_from_world": Rw[k].tolist()}})  # fmt: skip
+        for g in goals:
+            log.write({"type": "event", "event": g, "t": 1.0})
+        log.write({"type": "end", "photos": n_photos})
+    # robot-frame cameras: R_r = R_w @ R_TRUE, centre c_r = to_robot(c_w)
+    Rr = Rw @ R_TRUE
+    cr = to_robot(centers_w)
+    tr = -np.einsum("kij,kj->ki", Rr, cr)
+    pts = to_robot(rng.uniform([0.5, 0.5, 0.2], [3.5, 2.5, 2.0], (50, 3)))
+    write_colmap_model(tmp_path / "round_000" / "sfm", default_intrinsics(),
+                       Rr, tr, pts, np.ones((n_photos, 50), bool))  # fmt: skip
+    return cap, tmp_path / "round_000" / "sfm"
+
+
+def write_cloud(path, pts):
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(pts, np.float64)))
+    o3d.io.write_point_cloud(str(path), pc)
+    return path
+
+
+def test_uniform_weights_give_the_dense_stage_metrics(scene, surf):
+    rng = np.random.default_rng(2)
+    ref = surf.observable_points
+    cloud = ref[rng.random(len(ref)) < 0.5] + rng.normal(0, 0.008, (1, 3))
+    ours = weighted_cloud_metrics(cloud, scene.vertices, scene.triangles, ref)
+    theirs = cloud_metrics(cloud, scene.vertices, scene.triangles, ref)
+    for tau in ("1cm", "2cm", "5cm"):
+        for k in ("accuracy", "completeness", "fscore"):
+            assert ours[tau][k] == pytest.approx(theirs[tau][k], abs=1e-9)
+
+
+def test_a_perfect_cloud_is_complete_and_a_shifted_one_is_not_accurate(scene, surf):
+    ref, w = surf.observable_points, surf.observable_weights
+    m = weighted_cloud_metrics(ref, scene.vertices, scene.triangles, ref, w)
+    assert m["1cm"]["accuracy"] == 1.0 and m["1cm"]["completeness"] == 1.0
+    # 3 cm off the surface along its normal: inaccurate at 1 and 2 cm, accurate at 5 cm
+    from scenebot.evaluate.observable import triangle_normals
+
+    n, _ = triangle_normals(scene.vertices, scene.triangles)
+    off = ref + 0.03 * n[surf.triangle[surf.observable]]
+    m = weighted_cloud_metrics(off, scene.vertices, scene.triangles, ref, w)
+    assert m["2cm"]["accuracy"] < 0.02 and m["5cm"]["accuracy"] > 0.98
+    assert m["median_error_m"]["accuracy"] == pytest.approx(0.03, abs=0.002)
+
+
+def test_completeness_is_weighted_by_area(scene, surf):
+    ref = surf.observable_points[:1000]
+    w = np.ones(len(ref))
+    w[:100] = 9.0  # the first 100 samples stand for 900 of 1800 area units
+    m = weighted_cloud_metrics(ref[:100], scene.vertices, scene.triangles, ref, w)
+    d = np.linalg.norm(ref[:, None] - ref[None, :100], axis=2).min(1)
+    expect = np.sum(w * (d < 0.01)) / w.sum()
+    assert m["1cm"]["completeness"] == pytest.approx(expect)
+    assert m["1cm"]["completeness"] >= 0.5
+
+
+def test_the_similarity_recovers_the_robot_frame(tmp_path):
+    cap, sfm = write_round(tmp_path)
+    sim = robot_to_world(sfm, [cap])
+    assert sim.photos == 8
+    assert sim.scale == pytest.approx(S_TRUE, rel=1e-6)
+    assert np.allclose(sim.R, R_TRUE, atol=1e-6) and np.allclose(sim.t, T_TRUE, atol=1e-6)
+    assert sim.residual_m["max"] < 1e-6
+
+
+def test_capture_stats_count_photos_and_goals(tmp_path):
+    cap, _ = write_round(tmp_path, goals=["goal_reached", "goal_reached", "goal_abandoned"])
+    st = capture_stats([cap, cap / "log.jsonl"])
+    assert st["photos_per_round"] == [8, 8] and st["photos_total"] == 16
+    assert st["goals"]["reached"] == 4 and st["goals"]["attempted"] == 6
+    assert st["goals"]["reached_fraction"] == pytest.approx(4 / 6)
+    with pytest.raises(EvaluationError, match="not found"):
+        capture_stats([tmp_path / "nowhere"])
+
+
+def test_the_stage_writes_the_round_evaluation(tmp_path, scene, surf):
+    cap, sfm = write_round(tmp_path, goals=["goal_reached", "goal_abandoned"])
+    # the true observable surface in the robot frame, with half of it missing
+    ref = surf.observable_points
+    keep = ref[:, 0] < 2.0
+    cloud = write_cloud(tmp_path / "fused.ply", to_robot(ref[keep]))
+    per_photo = [{"name": "a", "position_error_m": 0.01, "heading_error_deg": 0.2}]
+    acc = {"evaluated": 8, "position_error_m": {"median": 0.01}, "per_photo": per_photo}
+    (sfm / "accuracy.json").write_text(json.dumps(acc))
+    outs = EvaluateOutputs(tmp_path / "round_000" / "evaluation.json",
+                           tmp_path / "round_000" / "evaluation.png")  # fmt: skip
+    obs = tmp_path / "eval" / "observable_surface.npz"
+    ev = run(Config(), EvaluateInputs(sfm, [cap], cloud, obs), outs, ECFG, scene=scene)
+    assert ev["round"] == 0 and ev["capture"]["photos_total"] == 8
+    assert ev["capture"]["goals"]["reached"] == 1
+    expect = surf.observable_weights[keep].sum() / surf.observable_weights.sum()
+    for tau in ("1cm", "2cm", "5cm"):
+        assert ev["dense"][tau]["accuracy"] > 0.999
+    # float32 round trips through the PLY and the similarity: within 1 cm everywhere
+    assert ev["dense"]["1cm"]["completeness"] == pytest.approx(expect, abs=0.01)
+    assert ev["sfm"]["per_photo_position_error_m"] == [0.01]
+    assert ev["alignment"]["scale"] == pytest.approx(S_TRUE, rel=1e-6)
+    saved = json.loads(outs.json.read_text())
+    assert saved["dense"]["points"] == int(keep.sum())
+    assert outs.png.stat().st_size > 20_000 and obs.is_file()
+    # a second round reuses the cached observable surface
+    ev2 = run(Config(), EvaluateInputs(sfm, [cap], cloud, obs), outs, ECFG, scene=scene)
+    assert ev2["observable"]["cached"]
+
+
+def test_without_truth_only_counts_are_written(tmp_path):
+    cap, sfm = write_round(tmp_path)
+    cfg = Config.model_validate({"robot": "photos", "photos": {"folder": str(tmp_path)}})
+    out = EvaluateOutputs(tmp_path / "ev.json")
+    ev = run(cfg, EvaluateInputs(sfm, [cap], None, None, round_index=3), out)
+    assert ev["round"] == 3 and ev["dense"] is None and ev["alignment"] is None
+    assert ev["capture"]["photos_total"] == 8 and ev["notes"]
+
+
+def test_localization_estimates_are_compared_in_the_world_frame(tmp_path):
+    cap, sfm = write_round(tmp_path)
+    sim = robot_to_world(sfm, [cap])
+    c_w, th = np.array([2.5, 1.0, 0.35]), 0.7
+    R_w = look_rotation(th)
+    truth = {"robot": {"x": 2.4, "y": 1.0, "theta": th}, "center": c_w.tolist(),
+             "R_cam_from_world": R_w.tolist()}  # fmt: skip
+    fix = {"ok": True, "center": to_robot(c_w + np.array([0.03, 0.0, 0.0])).tolist(),
+           "R_cam_from_world": (R_w @ R_TRUE).tolist()}  # fmt: skip
+    xy = to_robot(np.array([2.4, 1.04, 0.35]))
+    robot = {"x": float(xy[0]), "y": float(xy[1]), "theta": th - np.radians(35) + 0.02}
+    with CaptureLog(tmp_path / "r1" / "log.jsonl") as log:
+        log.write({"type": "event", "event": "localize", "localization": fix, "truth": truth})
+        log.write({"type": "event", "event": "localize_failed", "localization": {"ok": False}})
+        log.write({"type": "photo", "image": "images/a.jpg", "localization": robot,
+                   "localization_source": "this photo", "truth": truth})  # fmt: skip
+        carried = "odometry since the last fix"
+        log.write({"type": "photo", "image": "images/b.jpg", "localization": robot,
+                   "localization_source": carried, "truth": truth})  # fmt: skip
+    acc = localization_accuracy([tmp_path / "r1"], sim)
+    assert acc["failed_fixes"] == 1
+    assert acc["fixes"]["count"] == 1 and acc["photos"]["count"] == 1
+    assert acc["fixes"]["position_error_m"]["median"] == pytest.approx(0.03, abs=1e-6)
+    assert acc["fixes"]["heading_error_deg"]["median"] == pytest.approx(0.0, abs=1e-6)
+    assert acc["photos"]["position_error_m"]["median"] == pytest.approx(0.04, abs=1e-6)
+    assert acc["photos"]["heading_error_deg"]["median"] == pytest.approx(np.degrees(0.02))

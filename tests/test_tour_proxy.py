@@ -1,0 +1,126 @@
+"""Tour proxy: splat depth against true depth, hole filling, blob removal, bad clouds."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+
+import numpy as np
+import pytest
+
+from scenebot.dense import synthetic as syn
+from scenebot.tour._ti import init_taichi
+from scenebot.tour.camera import Camera, TourInputError, look_rotation
+from scenebot.tour.config import ProxyConfig
+from scenebot.tour.proxy import (
+    Splatter,
+    build_proxy,
+    fill_holes,
+    remove_small_blobs,
+)
+
+
+@pytest.fixture(scope="module")
+def scene_cloud():
+    scene = syn.box_room_scene(seed=1)
+    pts = syn.sample_surface(scene.vertices, scene.triangles, 150000, seed=1)
+    import open3d as o3d
+
+    ans = scene.raycaster.compute_closest_points(o3d.core.Tensor(pts.astype(np.float32)))
+    nrm = ans["primitive_normals"].numpy().astype(np.float64)
+    return scene, pts, nrm
+
+
+def test_splat_depth_matches_true_depth(scene_cloud):
+    init_taichi("cpu")
+    scene, pts, nrm = scene_cloud
+    # this cloud is far sparser on screen than an MVS cloud at photo resolution (the default
+    # splat cap suits those), so splats may grow to their full neighbour-distance size here
+    cfg = ProxyConfig(max_splat_px=8.0, splat_scale=0.7)
+    proxy = build_proxy(pts, nrm, None, cfg)
+    cam = Camera.pinhole(160, 120, 62.0)
+    sp = Splatter(proxy, cfg)
+    for heading in (0.0, 2.0, -2.5):
+        R = look_rotation(heading)
+        t = -R @ np.array([-0.5, 0.2, 0.0])
+        K = np.array([[cam.params[0], 0, 80], [0, cam.params[1], 60], [0, 0, 1.0]])
+        _, true_depth, _ = syn.render_view(scene, K, R, t, 160, 120, supersample=1)
+        z = sp.depth(cam, R, t)
+        hit = true_depth > 0
+        assert np.isfinite(z[hit]).mean() > 0.99
+        rel = np.abs(z[hit] - true_depth[hit]) / true_depth[hit]
+        assert np.median(rel) < 0.01
+        assert np.mean(rel < 0.05) > 0.95  # edges may blur, the surfaces must not
+
+
+def test_fill_holes_recovers_plane():
+    H, W = 60, 80
+    u, v = np.meshgrid(np.arange(W), np.arange(H))
+    inv = 0.4 + 0.002 * u + 0.001 * v  # a plane has linear inverse depth on screen
+    z = (1.0 / inv).astype(np.float32)
+    rng = np.random.default_rng(0)
+    holes = rng.random((H, W)) < 0.4
+    holes[20:35, 30:50] = True  # a big hole
+    zh = z.copy()
+    zh[holes] = np.inf
+    filled = fill_holes(zh, levels=6)
+    assert np.isfinite(filled).all()
+    np.testing.assert_allclose(filled, z, rtol=1e-3)
+    # nothing is filled without levels
+    assert np.isinf(fill_holes(zh, levels=0)[holes]).all()
+
+
+def test_fill_holes_prefers_background_at_depth_edges():
+    z = np.full((10, 30), np.inf, np.float32)
+    z[:, :5] = 1.0  # near object on the left
+    z[:, 20:] = 4.0  # wall on the right
+    filled = fill_holes(z, levels=4)
+    assert np.allclose(filled[:, 5:20], 4.0)
+
+
+def test_remove_small_blobs():
+    z = np.full((50, 50), np.inf, np.float32)
+    z[10:40, 10:40] = 2.0
+    z[2:4, 45:47] = 0.3  # a floater
+    out = remove_small_blobs(z, 10)
+    assert np.isinf(out[2:4, 45:47]).all()
+    assert np.isfinite(out[10:40, 10:40]).all()
+
+
+@pytest.mark.parametrize("n", [0, 5])
+def test_empty_or_tiny_cloud_is_a_clear_error(n):
+    pts = np.random.default_rng(0).random((n, 3))
+    with pytest.raises(TourInputError, match=r"tour\.proxy\.min_points"):
+        build_proxy(pts, None, None, ProxyConfig(), source="fused.ply")
+
+
+def test_floaters_are_dropped():
+    rng = np.random.default_rng(0)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 100), np.linspace(0, 1, 100)), -1).reshape(-1, 2)
+    wall = np.concatenate([g, np.zeros((len(g), 1))], 1)
+    floaters = rng.random((20, 3)) + np.array([0, 0, 0.5])
+    proxy = build_proxy(np.concatenate([wall, floaters]), None, None, ProxyConfig())
+    assert len(proxy) == len(wall)
+    assert np.all(np.abs(proxy.points[:, 2]) < 1e-6)
+    # normals of a plane from PCA
+    assert np.all(np.abs(np.abs(proxy.normals[:, 2]) - 1) < 1e-3)
+
+
+def test_camera_projection_roundtrip():
+    cam = Camera(640, 480, (550.0, 552.0, 321.0, 239.0, -0.02, 0.003, 0.001, -0.0005))
+    rays = cam.pixel_rays()
+    uv = cam.project(rays.reshape(-1, 3) * 2.5)
+    u, v = np.meshgrid(np.arange(640) + 0.5, np.arange(480) + 0.5)
+    np.testing.assert_allclose(uv, np.stack([u, v], -1).reshape(-1, 2), atol=1e-3)
+
+
+def test_remove_occluded_keeps_edges_and_drops_see_through():
+    from scenebot.tour.proxy import remove_occluded
+
+    z = np.full((20, 40), 1.0, np.float32)
+    z[:, 20:] = 3.0  # a true depth edge: the far half stays
+    z[8, 10] = 3.0  # the far wall seen through a gap in the near surface
+    out = remove_occluded(z, 7, 0.15)
+    assert np.isinf(out[8, 10])
+    assert np.isfinite(out[:, 20:]).all() and np.isfinite(out[:, :20][np.arange(20) != 8]).all()
