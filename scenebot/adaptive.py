@@ -91,6 +91,14 @@ def write_sim_state(capture_dir: Path, world) -> None:
     (Path(capture_dir) / SIM_STATE).write_text(json.dumps(doc, indent=1), encoding="utf-8")
 
 
+def map_fingerprint(sfm_dir: Path) -> str:
+    """SHA-1 of a map's ``images.bin``: which map a round was driven with (the evaluation
+    notices when that map has been rebuilt since)."""
+    import hashlib
+
+    return hashlib.sha1((Path(sfm_dir) / "images.bin").read_bytes()).hexdigest()
+
+
 def map_end_pose(sfm_dir: Path, camera_offset_m: tuple[float, float]) -> Pose2D:
     """The robot pose of the map's last photo (where the previous round ended), map frame."""
     from scenebot.plan.stage import read_map_geometry
@@ -225,6 +233,7 @@ def run_adaptive(
                 "round": round_index,
                 "started": dt.datetime.now().isoformat(timespec="seconds"),
                 "map": str(prev / "sfm"),
+                "map_sha1": map_fingerprint(prev / "sfm"),
                 "previous_round_complete": goals_doc.get("complete"),
                 "initial_estimate": initial.as_dict(),
                 "camera": {

@@ -292,3 +292,35 @@ def test_select_pairs_bridges_a_round_without_shared_frame():
         hb = next(q.heading for q in pri if q.name == b)
         assert abs((ha - hb + math.pi) % (2 * math.pi) - math.pi) <= math.radians(30) + 1e-9
     assert all(a[:2] == b[:2] for a, b in p["spatial"])  # odometry frames are per round
+
+
+def test_photos_registered_far_from_the_robots_own_estimate_are_left_out():
+    """drop_misplaced: a photo whose registered centre disagrees with the logged estimate by
+    more than the limit leaves the map; photos without an estimate are not judged."""
+    import math
+
+    import pycolmap
+
+    from scenebot.sfm.photos import Photo
+    from scenebot.sfm.stage import drop_misplaced
+
+    opts = pycolmap.SyntheticDatasetOptions()
+    opts.num_rigs, opts.num_cameras_per_rig, opts.num_frames_per_rig = 1, 1, 8
+    opts.num_points3D = 200
+    rec = pycolmap.synthesize_dataset(opts)
+    photos = []
+    for k, iid in enumerate(sorted(rec.reg_image_ids())):
+        im = rec.image(iid)
+        c = im.projection_center()
+        fwd = im.cam_from_world().rotation.matrix()[2]
+        th = math.atan2(fwd[1], fwd[0])
+        loc = None if k == 0 else (c[0] - 0.1 * math.cos(th), c[1] - 0.1 * math.sin(th), th)
+        if k == 3:  # the robot believed it was 2 m elsewhere
+            loc = (loc[0] + 2.0, loc[1], th)
+        photos.append(Photo(name=im.name, path=None, localization=loc))
+    n = rec.num_reg_images()
+    out = drop_misplaced(rec, photos, (0.1, 0.0), 0.5)
+    assert list(out) == [photos[3].name] and out[photos[3].name] == pytest.approx(2.0, abs=1e-6)
+    assert rec.num_reg_images() == n - 1
+    assert all(p.track.length() >= 2 for p in rec.points3D.values())
+    assert drop_misplaced(rec, photos, (0.1, 0.0), 0.0) == {}  # off

@@ -80,8 +80,10 @@ def _prior_bundle_adjustment(
     refine_focal_length: bool,
     refine_extra_params: bool,
     num_threads: int,
+    constant_ids: frozenset[int] = frozenset(),
 ) -> None:
-    """Global BA (Cauchy loss, 1 px) with position priors ``pred`` (rows of ``ids``)."""
+    """Global BA (Cauchy loss, 1 px) with position priors ``pred`` (rows of ``ids``); the
+    poses of ``constant_ids`` stay fixed."""
     priors = []
     cov = np.eye(3) * prior_std_m**2
     for iid, p in zip(ids, pred, strict=True):
@@ -103,6 +105,8 @@ def _prior_bundle_adjustment(
     config = pycolmap.BundleAdjustmentConfig()
     for iid in rec.reg_image_ids():
         config.add_image(iid)
+        if iid in constant_ids:
+            config.set_constant_rig_from_world_pose(rec.image(iid).frame_id)
     prior_opts = pycolmap.PosePriorBundleAdjustmentOptions()
     prior_opts.prior_position_fallback_stddev = prior_std_m
     adjuster = pycolmap.create_pose_prior_bundle_adjuster(opts, prior_opts, config, priors, rec)
@@ -127,6 +131,7 @@ def repair_circles(
     refine_focal_length: bool = False,
     refine_extra_params: bool = True,
     num_threads: int = -1,
+    constant_names: frozenset[str] | set[str] = frozenset(),
 ) -> tuple[pycolmap.Reconstruction, dict]:
     """Move photos that left their turn-in-place circle back and re-adjust (see module doc).
 
@@ -147,6 +152,8 @@ def repair_circles(
         max_error_px: observations beyond this reprojection error (px) are dropped.
         refine_focal_length, refine_extra_params: intrinsics refined by the adjustment.
         num_threads: solver threads.
+        constant_names: photos whose poses stay fixed (a previous round's, in an update):
+            never moved, held in the adjustment; their circles get no priors.
 
     Returns:
         The model and stats: photos moved (names and distances, m), residuals before/after.
@@ -154,7 +161,8 @@ def repair_circles(
     from scenebot.sfm.mapping import filter_observations
 
     by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
-    ph = [p for p in photos if p.name in by_name]
+    ph = [p for p in photos if p.name in by_name and p.name not in constant_names]
+    constant_ids = frozenset(by_name[n] for n in constant_names if n in by_name)
     ids = [by_name[p.name] for p in ph]
     circles = [g for g in turn_in_place_circles(ph) if len(g) >= min_photos]
     arm = np.asarray(lever_arm_m, float)
@@ -195,7 +203,14 @@ def repair_circles(
         C, h = _geometry(rec, ids, yaw)
         pred, _ = circle_residuals(C, h, circles, arm)
         _prior_bundle_adjustment(
-            rec, ids, pred, prior_std_m, refine_focal_length, refine_extra_params, num_threads
+            rec,
+            ids,
+            pred,
+            prior_std_m,
+            refine_focal_length,
+            refine_extra_params,
+            num_threads,
+            constant_ids,
         )
     filter_observations(rec, max_error_px)
     C, h = _geometry(rec, ids, yaw)

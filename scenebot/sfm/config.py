@@ -118,6 +118,22 @@ class SfmConfig(BaseModel):
             "photos are already adjusted, and the final refinement adjusts everything."
         ),
     )
+    max_estimate_deviation_m: float = Field(
+        0.5,
+        description=(
+            "A photo registered farther than this (m) from where the robot estimated it took "
+            "it (adaptive rounds log a map-frame estimate per photo) is left out of the map, "
+            "named in the log and report.json; 0 turns the check off."
+        ),
+    )
+    update_keep_previous_poses: bool = Field(
+        True,
+        description=(
+            "In a round update, the final refinement and the circle adjustment keep the "
+            "previous round's photo poses fixed: the map grows without bending what the robot "
+            "and later stages already used (false: adjust everything)."
+        ),
+    )
     update_fix_existing: bool = Field(
         True,
         description=(

@@ -52,6 +52,10 @@ def _stats(x: np.ndarray) -> dict[str, float]:
     }
 
 
+GROSS_FACTOR = 10.0  # a photo this many median errors off (and > GROSS_MIN_M) is a gross error
+GROSS_MIN_M = 0.25
+
+
 def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> dict:
     """Accuracy of the registered cameras against true poses.
 
@@ -82,7 +86,25 @@ def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> 
     if len(names) < 3:
         return {"evaluated": len(names), "note": "fewer than 3 registered photos with truth"}
     est_c, true_c = np.array(est_c), np.array(true_c)
-    s, R, t = umeyama(est_c, true_c)
+    # Robust similarity: photos registered grossly wrong (repeated textures can place a few
+    # photos metres off) are reported apart and kept out of the fit and the statistics.
+    inl = np.ones(len(names), bool)
+    for _ in range(5):
+        s, R, t = umeyama(est_c[inl], true_c[inl])
+        d = np.linalg.norm(s * est_c @ R.T + t - true_c, axis=1)
+        gross_m = max(GROSS_FACTOR * float(np.median(d[inl])), GROSS_MIN_M)
+        new = d <= gross_m
+        if new.sum() < 3 or np.array_equal(new, inl):
+            break
+        inl = new
+    gross = [(names[i], float(d[i])) for i in np.flatnonzero(~inl)]
+    keep = np.flatnonzero(inl)
+    names = [names[i] for i in keep]
+    est_c, true_c = est_c[keep], true_c[keep]
+    est_v = [est_v[i] for i in keep]
+    est_r = [est_r[i] for i in keep]
+    true_v = [true_v[i] for i in keep]
+    true_r = [true_r[i] for i in keep]
     mapped = s * est_c @ R.T + t
     err = mapped - true_c
     tv = np.array(true_v)
@@ -107,6 +129,13 @@ def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> 
     out = {
         "evaluated": len(names),
         "registered": rec.num_reg_images(),
+        "gross_errors": {
+            "count": len(gross),
+            "threshold_m": gross_m,
+            "photos": {n: round(e, 3) for n, e in gross},
+            "note": "registered farther than threshold_m from the truth after the robust "
+            "similarity; left out of the statistics",
+        },
         "similarity": {"scale": s, "R": R.tolist(), "t": t.tolist()},
         "metric_scale_error": abs(1.0 / s - 1.0),
         "frame_tilt_deg": tilt,

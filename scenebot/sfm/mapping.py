@@ -86,9 +86,12 @@ def robust_refinement(
     relax_first: bool = False,
     refine_focal_length: bool = True,
     refine_extra_params: bool = True,
+    constant_names: frozenset[str] | set[str] = frozenset(),
 ) -> dict:
     """Final robust bundle adjustment: drop observations beyond ``max_error_px``, then
     global BA with a Cauchy loss (scale 1 px), ``iterations`` times, and filter once more.
+    ``constant_names``: photos whose poses stay fixed (a previous round's, so a round update
+    only adds to the map and never bends what later stages and the robot already used).
 
     COLMAP's incremental mapper keeps observations up to 4 px with a squared loss; in scenes
     with view-dependent features (highlights, occlusion corners) those bend the camera
@@ -100,19 +103,37 @@ def robust_refinement(
     removed = 0
     if relax_first:
         opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
-        pycolmap.bundle_adjustment(rec, opts)
+        _adjust(rec, opts, constant_names)
     for _ in range(iterations):
         removed += filter_observations(rec, max_error_px)
         opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
         opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
         opts.ceres.loss_function_scale = 1.0
-        pycolmap.bundle_adjustment(rec, opts)
+        _adjust(rec, opts, constant_names)
     removed += filter_observations(rec, max_error_px)
     return {
         "observations_removed": removed,
         "reprojection_error_before_px": before,
         "reprojection_error_after_px": rec.compute_mean_reprojection_error(),
     }
+
+
+def _adjust(
+    rec: pycolmap.Reconstruction,
+    opts: pycolmap.BundleAdjustmentOptions,
+    constant_names: frozenset[str] | set[str],
+) -> None:
+    """Global bundle adjustment, the poses of ``constant_names`` held fixed."""
+    fixed = [i for i in rec.reg_image_ids() if rec.image(i).name in constant_names]
+    if not fixed:
+        pycolmap.bundle_adjustment(rec, opts)
+        return
+    config = pycolmap.BundleAdjustmentConfig()
+    for iid in rec.reg_image_ids():
+        config.add_image(iid)
+    for iid in fixed:
+        config.set_constant_rig_from_world_pose(rec.image(iid).frame_id)
+    pycolmap.create_default_bundle_adjuster(opts, config, rec).solve()
 
 
 def _ba_options(
@@ -274,6 +295,12 @@ def map_photos(
         )
     ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
     best = ranked[0]
+    kept_previous: frozenset[str] = frozenset()
+    if mode == "incremental" and cfg.update_keep_previous_poses and previous is not None:
+        prev_names = {previous.image(i).name for i in previous.reg_image_ids()}
+        kept_previous = frozenset(
+            best.image(i).name for i in best.reg_image_ids() if best.image(i).name in prev_names
+        )
     kept = {best.image(i).name for i in best.reg_image_ids()}
     others = {r.image(i).name for r in ranked[1:] for i in r.reg_image_ids()} - kept
     dropped = _reasons(db_path, names, kept, others, cfg)
@@ -312,6 +339,8 @@ def map_photos(
             relax_first=False,
             refine_focal_length=not fix_focal,
             refine_extra_params=cfg.refine_distortion,
+            constant_names=kept_previous,
         )
         refinement["seconds"] = time.perf_counter() - t1
+        refinement["fixed_previous_photos"] = len(kept_previous)
     return MappingResult(best, mode, len(ranked), dropped, time.perf_counter() - t0, refinement)

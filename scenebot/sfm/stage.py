@@ -157,6 +157,50 @@ def _usable_previous(
     return previous
 
 
+def drop_misplaced(
+    rec: pycolmap.Reconstruction,
+    photos: list[Photo],
+    camera_offset_m,
+    max_deviation_m: float,
+) -> dict[str, float]:
+    """Deregister photos whose registered camera centre lies farther than ``max_deviation_m``
+    from where the robot itself estimated the photo was taken (its ``localization`` in the
+    log: a visual fix or odometry carried from one, map frame). Repeated textures can
+    register a photo confidently at the wrong place; the robot's estimate is independent
+    evidence. Photos without an estimate (round 0, bring-your-own) are not checked.
+
+    Args:
+        rec: the model, already in the robot frame (modified).
+        photos: the photo set.
+        camera_offset_m: camera centre (forward, left) in the robot frame (m), or None.
+        max_deviation_m: the allowed distance (m); 0 or less turns the check off.
+
+    Returns:
+        Name -> deviation (m) of the photos taken out.
+    """
+    if max_deviation_m <= 0:
+        return {}
+    fwd, left = (0.0, 0.0) if camera_offset_m is None else map(float, camera_offset_m)
+    by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
+    out: dict[str, float] = {}
+    for p in photos:
+        iid = by_name.get(p.name)
+        if iid is None or p.localization is None:
+            continue
+        x, y, th = p.localization
+        c, s_ = math.cos(th), math.sin(th)
+        expect = np.array([x + fwd * c - left * s_, y + fwd * s_ + left * c])
+        d = float(np.linalg.norm(rec.image(iid).projection_center()[:2] - expect))
+        if d > max_deviation_m:
+            rec.deregister_frame(rec.image(iid).frame_id)
+            out[p.name] = d
+    if out:
+        for pid in list(rec.point3D_ids()):
+            if rec.point3D(pid).track.length() < 2:
+                rec.delete_point3D(pid)
+    return out
+
+
 def write_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
     """Write ``rec`` as a COLMAP binary model into ``model_dir`` (created)."""
     model_dir.mkdir(parents=True, exist_ok=True)
@@ -267,9 +311,24 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     )
     align_to_robot_frame(rec, alignment)
     timings["align"] = time.perf_counter() - t
+    misplaced = drop_misplaced(rec, photos, alignment.camera_offset_m, cfg.max_estimate_deviation_m)
+    if misplaced:
+        log.warning(
+            "%d photo(s) registered far from where the robot estimated it took them "
+            "(> sfm.max_estimate_deviation_m = %.2f m), left out of the map: %s",
+            len(misplaced),
+            cfg.max_estimate_deviation_m,
+            ", ".join(f"{n} ({d:.2f} m)" for n, d in misplaced.items()),
+        )
+        mres.dropped.update(
+            {n: f"registered {d:.2f} m from the robot's own estimate" for n, d in misplaced.items()}
+        )
     first = alignment  # the metric scale found on the mapped model (report.json "scale")
     total_scale = alignment.scale
 
+    kept_previous: frozenset[str] = frozenset()
+    if mres.mode == "incremental" and cfg.update_keep_previous_poses and previous is not None:
+        kept_previous = frozenset(previous.image(i).name for i in previous.reg_image_ids())
     circle_stats: dict = {}
     if (
         cfg.camera_offset_m is not None
@@ -294,6 +353,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             refine_focal_length=not fix_focal,
             refine_extra_params=cfg.refine_distortion,
             num_threads=cfg.num_threads,
+            constant_names=kept_previous,
         )
         alignment = robot_frame_transform(
             rec,
@@ -333,7 +393,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     timings["total"] = time.perf_counter() - t_start
     report = {
         "photos": len(photos),
-        "registered": n_reg,
+        "registered": rec.num_reg_images(),
         "points3D": rec.num_points3D(),
         "mean_reprojection_error_px": rec.compute_mean_reprojection_error(),
         "mapping_mode": mres.mode,
