@@ -27,7 +27,6 @@ compares the two.
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import logging
 import math
@@ -174,7 +173,7 @@ def run_adaptive(
     Raises:
         FileNotFoundError: an input of the previous round is missing (names it).
     """
-    from scenebot.capture import archive_previous, make_backend
+    from scenebot.capture import archive_previous, make_backend, session_record
     from scenebot.follow import PathFollower
     from scenebot.localize import make_localizer
     from scenebot.plan.navgrid import NavGrid
@@ -225,27 +224,17 @@ def run_adaptive(
     ):
         localizer = make_localizer(prev / "sfm", cfg.localize, cache_file=Path(tmp) / "i.flann")
         clog.write(
-            {
-                "type": "session",
-                "t": robot.now,
-                "robot": cfg.robot,
-                "scene": cfg.scene,
-                "round": round_index,
-                "started": dt.datetime.now().isoformat(timespec="seconds"),
-                "map": str(prev / "sfm"),
-                "map_sha1": map_fingerprint(prev / "sfm"),
-                "previous_round_complete": goals_doc.get("complete"),
-                "initial_estimate": initial.as_dict(),
-                "camera": {
-                    "model": "PINHOLE",
-                    "width": cfg.sim.camera.width,
-                    "height": cfg.sim.camera.height,
-                    "focal_px": world.intrinsics.fx if world is not None else None,
-                },
-                "config": cfg.model_dump(
-                    mode="json", include={"world", "sim", "follow", "adaptive", "localize"}
-                ),
-            }
+            session_record(
+                cfg,
+                robot,
+                world,
+                round_index,
+                {"world", "sim", "follow", "adaptive", "localize"},
+                map=str(prev / "sfm"),
+                map_sha1=map_fingerprint(prev / "sfm"),
+                previous_round_complete=goals_doc.get("complete"),
+                initial_estimate=initial.as_dict(),
+            )
         )
         bar = tqdm(total=budget, desc=f"round {round_index} photos", unit="photo",
                    disable=not progress)  # fmt: skip

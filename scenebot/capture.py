@@ -64,6 +64,29 @@ def _start_pose(cfg: Config, scene, collision_map) -> Pose2D:
     return Pose2D(float(xy[0]), float(xy[1]), 0.0)
 
 
+def session_record(cfg: Config, robot, world, round_index: int, sections: set, **extra) -> dict:
+    """The first record of a capture log (see :mod:`scenebot.capturelog`): robot, scene,
+    round, start time, camera, the config ``sections`` the capture used, and ``extra``."""
+    cam = cfg.sim.camera
+    return {
+        "type": "session",
+        "t": robot.now,
+        "robot": cfg.robot,
+        "scene": cfg.scene,
+        "round": round_index,
+        "started": dt.datetime.now().isoformat(timespec="seconds"),
+        **extra,
+        "camera": {
+            "model": "PINHOLE",
+            "width": cam.width,
+            "height": cam.height,
+            # the simulator's exact focal; a real camera's EXIF is the authority
+            "focal_px": world.intrinsics.fx if world is not None else None,
+        },
+        "config": cfg.model_dump(mode="json", include=sections),
+    }
+
+
 def make_sim_backend(cfg: Config, start: Pose2D | None = None):
     """(robot, camera, world) of the simulator for ``cfg``.
 
@@ -135,26 +158,8 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
     robot, camera, world = make_backend(cfg, capture_dir)
     session = capture_dir / "session.jsonl"
     rng = np.random.default_rng([cfg.seed, round_index])
-    cam = cfg.sim.camera
     with CaptureLog(session) as clog, robot:
-        clog.write(
-            {
-                "type": "session",
-                "t": robot.now,
-                "robot": cfg.robot,
-                "scene": cfg.scene,
-                "round": round_index,
-                "started": dt.datetime.now().isoformat(timespec="seconds"),
-                "camera": {
-                    "model": "PINHOLE",
-                    "width": cam.width,
-                    "height": cam.height,
-                    # the simulator's exact focal; a real camera's EXIF is the authority
-                    "focal_px": world.intrinsics.fx if world is not None else None,
-                },
-                "config": cfg.model_dump(mode="json", include={"world", "sim", "exploration"}),
-            }
-        )
+        clog.write(session_record(cfg, robot, world, round_index, {"world", "sim", "exploration"}))
         bar = tqdm(total=cfg.exploration.photos, desc=f"round {round_index} photos",
                    unit="photo", disable=not progress)  # fmt: skip
         taker = PhotoTaker(

@@ -40,14 +40,15 @@ from typing import IO, Any
 import numpy as np
 
 
-def _default(o: Any) -> Any:
+def json_default(o: Any) -> Any:
+    """``json.dumps`` default for numpy values and paths (the logs and reports use it)."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
         return o.tolist()
     if isinstance(o, Path):
         return str(o)
-    raise TypeError(f"cannot write {type(o).__name__} to the capture log")
+    raise TypeError(f"cannot write {type(o).__name__} as JSON")
 
 
 class CaptureLog:
@@ -59,7 +60,7 @@ class CaptureLog:
         self._fh: IO[str] = open(self.path, "a", encoding="utf-8")  # noqa: SIM115
 
     def write(self, record: dict) -> None:
-        self._fh.write(json.dumps(record, default=_default, sort_keys=False) + "\n")
+        self._fh.write(json.dumps(record, default=json_default, sort_keys=False) + "\n")
         self._fh.flush()
         os.fsync(self._fh.fileno())
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from scenebot.capturelog import read_log
+from scenebot.sfm.evaluate import summary_stats
 
 GOAL_EVENTS = ("goal_reached", "goal_abandoned", "goal_skipped")
 
@@ -58,18 +59,6 @@ class Similarity:
             "photos": self.photos,
             "residual_m": self.residual_m,
         }
-
-
-def _stats(x: np.ndarray) -> dict[str, float]:
-    x = np.asarray(x, np.float64)
-    if x.size == 0:
-        return {}
-    return {
-        "median": float(np.median(x)),
-        "mean": float(np.mean(x)),
-        "p90": float(np.percentile(x, 90)),
-        "max": float(np.max(x)),
-    }
 
 
 def _log_path(capture: Path) -> Path:
@@ -124,7 +113,7 @@ def robot_to_world(sfm_dir: Path, captures: Sequence[Path]) -> Similarity:
     est, tru = np.array(est), np.array(tru)
     s, R, t = umeyama(est, tru)
     res = np.linalg.norm(s * est @ R.T + t - tru, axis=1)
-    return Similarity(float(s), R, t, len(est), _stats(res))
+    return Similarity(float(s), R, t, len(est), summary_stats(res))
 
 
 def weighted_cloud_metrics(
@@ -265,8 +254,8 @@ def _summary(errs: list[tuple[str, float, float | None]]) -> dict:
                      if e[2] is not None])  # fmt: skip
     return {
         "count": len(errs),
-        "position_error_m": _stats(pos),
-        "heading_error_deg": _stats(head),
+        "position_error_m": summary_stats(pos),
+        "heading_error_deg": summary_stats(head),
         "per_estimate": [
             {"image": n, "position_error_m": p,
              "heading_error_deg": None if h is None

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenebot.capturelog import json_default
 from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.metrics import (
     EvaluationError,
@@ -220,20 +221,10 @@ def run(
         out["notes"].append("no dense cloud given: dense metrics skipped")
     out["seconds"] = time.perf_counter() - t0
     outputs.json.parent.mkdir(parents=True, exist_ok=True)
-    outputs.json.write_text(json.dumps(out, indent=1, default=_jsonable) + "\n")
+    outputs.json.write_text(json.dumps(out, indent=1, default=json_default) + "\n")
     if outputs.png is not None and ecfg.plots:
         plot_evaluation(out, outputs.png, surf, cloud)
     return out
-
-
-def _jsonable(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"cannot write {type(o).__name__} to evaluation.json")
 
 
 def plot_evaluation(ev: dict, png: Path, surf=None, cloud: np.ndarray | None = None) -> Path:

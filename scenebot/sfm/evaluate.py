@@ -41,8 +41,10 @@ def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.nda
     return s, R, t
 
 
-def _stats(x: np.ndarray) -> dict[str, float]:
-    if len(x) == 0:
+def summary_stats(x: np.ndarray) -> dict[str, float]:
+    """Median, mean, 90th percentile and maximum of ``x`` (empty: ``{}``)."""
+    x = np.asarray(x, np.float64)
+    if x.size == 0:
         return {}
     return {
         "median": float(np.median(x)),
@@ -140,13 +142,13 @@ def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> 
         "metric_scale_error": abs(1.0 / s - 1.0),
         "frame_tilt_deg": tilt,
         "frame_yaw_in_world_deg": frame_yaw,
-        "position_error_m": _stats(total),
-        "line_of_sight_error_m": _stats(los),
-        "transverse_error_m": _stats(transverse),
-        "position_error_cm": _stats(total * 100),
-        "position_error_in": _stats(total / M_PER_INCH),
-        "heading_error_deg": _stats(heading),
-        "rotation_error_deg": _stats(rot_err),
+        "position_error_m": summary_stats(total),
+        "line_of_sight_error_m": summary_stats(los),
+        "transverse_error_m": summary_stats(transverse),
+        "position_error_cm": summary_stats(total * 100),
+        "position_error_in": summary_stats(total / M_PER_INCH),
+        "heading_error_deg": summary_stats(heading),
+        "rotation_error_deg": summary_stats(rot_err),
         "per_photo": [
             {
                 "name": n,
