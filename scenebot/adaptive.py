@@ -113,6 +113,25 @@ def map_end_pose(sfm_dir: Path, camera_offset_m: tuple[float, float]) -> Pose2D:
     return Pose2D(float(x), float(y), th % (2 * math.pi))
 
 
+class SnappingPlanner:
+    """A :class:`~scenebot.plan.path.GridPlanner` whose goals move off obstacle cells: a bump
+    near a goal marks a disk there, and the goal then moves to the nearest free cell within
+    ``snap_m`` (the planner's ``plan.goal_snap_m``) instead of being given up."""
+
+    def __init__(self, planner, snap_m: float):
+        self.planner = planner
+        self.snap_m = snap_m
+
+    def __call__(self, start_xy: np.ndarray, goal_xy: np.ndarray):
+        from scenebot.plan.stage import snap_to_free
+
+        snapped = snap_to_free(self.planner.grid, np.asarray(goal_xy, float), self.snap_m)
+        return self.planner(start_xy, goal_xy if snapped is None else snapped)
+
+    def mark_obstacle(self, xy: np.ndarray, radius_m: float) -> int:
+        return self.planner.mark_obstacle(xy, radius_m)
+
+
 def _goal_event(clog: CaptureLog, robot, event: str, index: int, goal: dict, **fields):
     from scenebot.explore import log_event
 
@@ -210,7 +229,9 @@ def run_adaptive(
     (capture_dir / "images").mkdir(exist_ok=True)
     (capture_dir / "nav").mkdir(exist_ok=True)
     robot, camera, world = make_backend(cfg, capture_dir, start=read_sim_state(prev / "capture"))
-    planner = GridPlanner(NavGrid.load(need["grid"]), cfg.plan.simplify_factor)
+    planner = SnappingPlanner(
+        GridPlanner(NavGrid.load(need["grid"]), cfg.plan.simplify_factor), cfg.plan.goal_snap_m
+    )
     initial = map_end_pose(prev / "sfm", cfg.camera_mount())
     truth = getattr(robot, "truth_record", None)
     session = capture_dir / "session.jsonl"

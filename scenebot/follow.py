@@ -371,6 +371,7 @@ class PathFollower:
                 if r.status in (MotionStatus.BUMPED, MotionStatus.STALLED):
                     plan = self._handle_obstacle(r, goal)
                     path = plan.waypoints_xy
+                    goal = path[-1].copy()  # the planner may move a goal off a marked obstacle
                     target = 1 if len(path) > 1 else 0
                     continue
                 at_node = step >= dist - 1e-9

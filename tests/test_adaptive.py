@@ -192,3 +192,22 @@ def test_map_end_pose_is_the_robot_behind_the_last_camera(tmp_path):
     p = map_end_pose(tmp_path, (0.1, 0.0))
     assert (p.x, p.y) == pytest.approx((1.0, 1.9))
     assert abs(wrap_angle(p.theta - math.pi / 2)) < 1e-9
+
+
+def test_replanning_moves_a_goal_off_a_freshly_marked_obstacle():
+    """A bump near the goal marks a disk over it; the snapping planner still plans, to the
+    nearest free cell, instead of giving the goal up."""
+    from scenebot.adaptive import SnappingPlanner
+    from scenebot.plan.path import GridPlanner, PlanFailure
+
+    grid, _ = _grid()
+    start, goal = np.array([0.8, 0.8]), np.array([3.2, 0.8])
+    plain = GridPlanner(grid)
+    snapping = SnappingPlanner(GridPlanner(grid), 0.3)
+    for p in (plain, snapping):
+        p.mark_obstacle(goal + np.array([0.05, 0.0]), 0.15)
+    assert isinstance(plain(start, goal), PlanFailure)
+    path = snapping(start, goal)
+    assert not isinstance(path, PlanFailure)
+    end = path.waypoints_xy[-1]
+    assert 0.1 < np.hypot(*(end - goal)) <= 0.3
