@@ -6,8 +6,10 @@ normal ``n`` in the camera frame, facing the camera) and improves it by
 * random initialisation (depth uniform in inverse depth inside the view's depth range),
 * red-black (checkerboard) propagation: every pixel tests the planes of 4 or 8 neighbours of
   the other colour (distance 1 and 3), re-evaluated at its own ray,
-* refinement: a random hypothesis and a perturbation of the current one whose size halves each
-  iteration,
+* refinement: a random hypothesis, a perturbation of the current one whose size halves each
+  iteration, and a perturbation of its normal alone at the same depth,
+* random draws from a counter-based hash of (pixel, kernel call, draw): a depth map is the same
+  however the threads share the pixels,
 * a photometric cost: bilaterally weighted NCC over a sparse (2r+1)^2 window (step s) warped by
   the plane-induced homography ``H = K_s (R + t n^T / rho) K_r^-1`` (``rho = n . X``),
 * view selection: the cost is the mean of the ``top_k`` best source views, so occluded or
@@ -309,9 +311,39 @@ def _cost(
 
 
 @ti.func
-def _random_normal(ray):
+def _hash32(x: ti.u32) -> ti.u32:
+    """An integer hash (lowbias32): the counter-based random numbers below."""
+    x ^= x >> ti.u32(16)
+    x *= ti.u32(0x7FEB352D)
+    x ^= x >> ti.u32(15)
+    x *= ti.u32(0x846CA68B)
+    x ^= x >> ti.u32(16)
+    return x
+
+
+@ti.func
+def _u01(i, j, salt, k):
+    """Uniform in [0, 1) from (pixel, call, draw): the same for any thread schedule, so a
+    depth map does not depend on how the CPU threads happened to share the pixels."""
+    h = _hash32(ti.u32(salt) * ti.u32(0x9E3779B9) + ti.u32(k))
+    h = _hash32(h ^ (ti.u32(i) * ti.u32(73856093)) ^ (ti.u32(j) * ti.u32(19349663)))
+    return ti.cast(h >> ti.u32(8), ti.f32) * (1.0 / 16777216.0)
+
+
+@ti.func
+def _randn(i, j, salt, k):
+    """Standard normal (Box-Muller) from draws ``k`` and ``k + 1``."""
+    u1 = ti.max(_u01(i, j, salt, k), 1e-7)
+    u2 = _u01(i, j, salt, k + 1)
+    return ti.sqrt(-2.0 * ti.log(u1)) * ti.cos(6.283185307 * u2)
+
+
+@ti.func
+def _random_normal(ray, i, j, salt, k):
     """Random unit normal facing the camera (angle to -ray below ~84 degrees)."""
-    n = ti.Vector([ti.randn(), ti.randn(), ti.randn()]).normalized(1e-12)
+    n = ti.Vector(
+        [_randn(i, j, salt, k), _randn(i, j, salt, k + 2), _randn(i, j, salt, k + 4)]
+    ).normalized(1e-12)
     rdir = ray.normalized()
     if n.dot(rdir) > 0.0:
         n = -n
@@ -321,8 +353,9 @@ def _random_normal(ray):
 
 
 @ti.func
-def _perturb_normal(n, ray, scale):
-    p = (n + scale * ti.Vector([ti.randn(), ti.randn(), ti.randn()])).normalized(1e-12)
+def _perturb_normal(n, ray, scale, i, j, salt, k):
+    noise = ti.Vector([_randn(i, j, salt, k), _randn(i, j, salt, k + 2), _randn(i, j, salt, k + 4)])
+    p = (n + scale * noise).normalized(1e-12)
     if p.dot(ray.normalized()) > -0.05:
         p = n
     return p
@@ -371,13 +404,13 @@ def _precompute_ref(
 
 
 @ti.kernel
-def _random_init(depth: nd2, normal: nd3, kinv_a: nd2, dmin: ti.f32, dmax: ti.f32):
+def _random_init(depth: nd2, normal: nd3, kinv_a: nd2, dmin: ti.f32, dmax: ti.f32, salt: ti.i32):
     kinv = ti.Matrix([[kinv_a[r, c] for c in ti.static(range(3))] for r in ti.static(range(3))])
     for i, j in depth:
         ray = kinv @ ti.Vector([j + 0.5, i + 0.5, 1.0])
-        inv = 1.0 / dmax + ti.random() * (1.0 / dmin - 1.0 / dmax)
+        inv = 1.0 / dmax + _u01(i, j, salt, 0) * (1.0 / dmin - 1.0 / dmax)
         depth[i, j] = 1.0 / inv
-        n = _random_normal(ray)
+        n = _random_normal(ray, i, j, salt, 1)
         for c in ti.static(range(3)):
             normal[i, j, c] = n[c]
 
@@ -450,13 +483,15 @@ def _sweep(
     dmax: ti.f32,
     R: ti.template(),
     STEP: ti.template(),
+    salt: ti.i32,
 ):
     """One half (red or black) of a PatchMatch iteration: propagation then refinement.
 
     Candidates per pixel: the planes of ``num_nb`` (4 or 8) neighbours of the other colour
-    (distance 1, then 3), a random hypothesis when ``do_random``, and a perturbation of the
-    best one (inverse-depth span and normal noise proportional to ``scale``). With ``use_sel``
-    only the pixel's selected sources (``sel``, from :func:`_eval_all`) are evaluated.
+    (distance 1, then 3), a random hypothesis when ``do_random``, a perturbation of the best
+    one (inverse-depth span and normal noise proportional to ``scale``) and a perturbation of
+    its normal alone. With ``use_sel`` only the pixel's selected sources (``sel``, from
+    :func:`_eval_all`) are evaluated.
     """
     kinv = ti.Matrix([[kinv_a[r, c] for c in ti.static(range(3))] for r in ti.static(range(3))])
     h, w = depth.shape[0], depth.shape[1]
@@ -475,7 +510,7 @@ def _sweep(
             mask = -1
             if use_sel:
                 mask = sel[i, j]
-            n_cand = num_nb + 2
+            n_cand = num_nb + 3
             for k in range(n_cand):
                 cd = -1.0
                 cn = bn
@@ -500,13 +535,18 @@ def _sweep(
                             cn = n2
                 elif k == num_nb:
                     if do_random:
-                        cd = 1.0 / (inv_lo + ti.random() * (inv_hi - inv_lo))
-                        cn = _random_normal(ray)
+                        cd = 1.0 / (inv_lo + _u01(i, j, salt, 0) * (inv_hi - inv_lo))
+                        cn = _random_normal(ray, i, j, salt, 1)
+                elif k == num_nb + 2:
+                    # the normal alone: once the depth is right, a joint perturbation rarely
+                    # improves the normal because the depth step costs more than the tilt gains
+                    cd = bd
+                    cn = _perturb_normal(bn, ray, scale, i, j, salt, 14)
                 else:
-                    inv_p = 1.0 / bd + (2.0 * ti.random() - 1.0) * (inv_hi - inv_lo) * scale
+                    inv_p = 1.0 / bd + (2.0 * _u01(i, j, salt, 7) - 1.0) * (inv_hi - inv_lo) * scale
                     if inv_p > inv_lo and inv_p < inv_hi:
                         cd = 1.0 / inv_p
-                        cn = _perturb_normal(bn, ray, scale)
+                        cn = _perturb_normal(bn, ray, scale, i, j, salt, 8)
                 if cd >= dmin and cd <= dmax:
                     c2, p2, _m = _cost(
                         i, j, cd, cn, kinv, wn, rn, src, src_hw, A_all, b_all, Q_all, q_all,
@@ -604,6 +644,11 @@ class PatchMatchSolver:
                 f"({step}) so that the window is symmetric"
             )
         self.nw = 2 * r // step + 1
+
+    def _next_salt(self) -> int:
+        """A new stream of random draws for the next kernel call (see :func:`_u01`)."""
+        self._salt = getattr(self, "_salt", 0) + 1
+        return self._salt
 
     # -- geometry of one level ---------------------------------------------------------------
     @staticmethod
@@ -708,7 +753,7 @@ class PatchMatchSolver:
                 _sweep(
                     color, scale, int(random_restarts), num_nb, int(use_sel), depth, normal,
                     cost, photo, sel, *args, depth_range[0], depth_range[1], cfg.window_radius,
-                    cfg.window_step,
+                    cfg.window_step, self._next_salt(),
                 )  # fmt: skip
             scale *= 0.5
 
@@ -738,6 +783,7 @@ class PatchMatchSolver:
         Returns:
             Unfiltered depth, normal, cost and photometric cost maps at full resolution.
         """
+        self._salt = self.cfg.seed * 7919  # the random draws restart: repeatable per view
         cfg = self.cfg
         if not srcs:
             raise ValueError(f"view {ref.name}: no source views, cannot estimate depth")
@@ -779,7 +825,7 @@ class PatchMatchSolver:
             else:
                 iters, nb = cfg.iterations[lev], cfg.neighbors[min(lev, len(cfg.neighbors) - 1)]
                 if depth_np is None:
-                    _random_init(maps[0], maps[1], L["kinv"], dmin, dmax)
+                    _random_init(maps[0], maps[1], L["kinv"], dmin, dmax, self._next_salt())
                 else:
                     up_d = cv2.resize(depth_np, (w, h), interpolation=cv2.INTER_NEAREST)
                     up_n = cv2.resize(normal_np, (w, h), interpolation=cv2.INTER_NEAREST)
