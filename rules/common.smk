@@ -169,7 +169,27 @@ def evaluation_products(wildcards):
     files = [f"{RESULTS}/eval/observable_surface.png"] if SIMULATED else []
     for r in campaign_rounds():
         files += [f"{round_dir(r)}/evaluation.json", f"{round_dir(r)}/evaluation.png"]
-    return files + [
-        f"{RESULTS}/final/evaluation.json",
-        f"{RESULTS}/final/evaluation.png",
-    ]
+    files += [f"{RESULTS}/final/evaluation.json", f"{RESULTS}/final/evaluation.png"]
+    if SIMULATED and CFG.evaluate.validity_candidates > 0:
+        files += [
+            f"{RESULTS}/final/score_validity.json",
+            f"{RESULTS}/final/score_validity.png",
+        ]
+    return files
+
+
+def validity_round(wildcards):
+    """The round of the score-validity study: evaluate.validity_round, or the last round
+    when the campaign stopped before it."""
+    return min(CFG.evaluate.validity_round, last_round_index(wildcards))
+
+
+def validity_candidates(wildcards):
+    """The scored candidates and the map of the score-validity round."""
+    d = round_dir(validity_round(wildcards))
+    return [f"{d}/candidates.csv"] + [f"{d}/sfm/{f}" for f in MODEL_FILES]
+
+
+def validity_captures(wildcards):
+    """The capture logs of rounds 0..validity round (their photos and true poses)."""
+    return captures_until(SimpleNamespace(r=f"{validity_round(wildcards):03d}"))

@@ -88,3 +88,35 @@ rule evaluation:
     input:
         evaluation_products,
     localrule: True
+
+
+# Score validity (paper IV.B's key claim, tested): random scored candidates of one round
+# (evaluate.validity_round, default 0) rendered by ULR from that round's photos and by the
+# simulator from the truth; Spearman's rho between the heuristic score and PSNR.
+rule validity:
+    input:
+        code=stage_code("evaluate"),
+        candidates=validity_candidates,
+        captures=validity_captures,
+        dense=f"{RESULTS}/final/dense/fused.ply",
+        dense_model=last_round_model,
+    output:
+        json=f"{RESULTS}/final/score_validity.json",
+        png=f"{RESULTS}/final/score_validity.png",
+    log:
+        f"{RESULTS}/logs/validity.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/validity.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    threads: workflow.cores
+    params:
+        py=PY,
+        cfg=stage_params("world", "sim", "evaluate", "tour", "goals"),
+        scene_dir=lambda w, output: Path(output.json).parents[1],
+        round=validity_round,
+        dense_round=last_round_index,
+    shell:
+        "{params.py:q} -m scenebot validity --params {params.cfg:q} "
+        "--scene-dir {params.scene_dir:q} --round {params.round} --dense {input.dense:q} "
+        "--dense-round {params.dense_round} --out {output.json:q} 2> >(tee {log:q} >&2)"

@@ -274,13 +274,15 @@ def run_adaptive(
                 else:
                     reason = None
                 if reason is not None:
-                    _goal_event(clog, robot, "goal_skipped", k, goal, reason=reason)
+                    _goal_event(clog, robot, "goal_skipped", k, goal, reason=reason,
+                                robot_goal=path.get("robot_goal"))  # fmt: skip
                     outcomes.append({"goal_index": k, "status": "skipped", "reason": reason})
                     continue
                 theta = float(goal["theta"])
                 res = _go(follower, path, theta, k)
                 if not res.reached:
                     _goal_event(clog, robot, "goal_abandoned", k, goal, reason=res.reason,
+                                robot_goal=path.get("robot_goal"),
                                 obstacles=res.obstacles)  # fmt: skip
                     outcomes.append({"goal_index": k, "status": "abandoned", "reason": res.reason})
                     continue

@@ -213,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from scenebot.evaluate.cli import add_parsers
 
-    add_parsers(sub)  # observable, evaluate
+    add_parsers(sub)  # observable, evaluate, validity
 
     cp = sub.add_parser("campaign", help="campaign.json: photos, registered, scores per round")
     with_config(cp)

@@ -17,6 +17,7 @@ from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.metrics import (
     EvaluationError,
     capture_stats,
+    goal_truth,
     localization_accuracy,
     robot_to_world,
     weighted_cloud_metrics,
@@ -134,6 +135,35 @@ def test_capture_stats_count_photos_and_goals(tmp_path):
     assert st["goals"]["reached_fraction"] == pytest.approx(4 / 6)
     with pytest.raises(EvaluationError, match="not found"):
         capture_stats([tmp_path / "nowhere"])
+
+
+def test_goal_truth_counts_reachable_goals_and_true_stopping_distances(tmp_path):
+    """Goals in the map frame are moved to the world; one inside the obstacle box is not
+    reachable; a reached goal's distance is the true robot position's distance to it."""
+    cap, sfm = write_round(tmp_path)
+    sim = robot_to_world(sfm, [cap])
+    free = np.array([3.0, 2.0])  # world
+    blocked = np.array([1.3, 1.3])  # inside the obstacle box
+    near, far = free + np.array([0.03, 0.04]), free + np.array([0.3, 0.0])
+    with CaptureLog(tmp_path / "r1.jsonl") as log:
+        for k, (gw, ev, stop) in enumerate(
+            [(free, "goal_reached", near), (free, "goal_reached", far),
+             (blocked, "goal_abandoned", None), (free, "goal_skipped", None)]
+        ):  # fmt: skip
+            rec = {"type": "event", "event": ev, "goal_index": k,
+                   "robot_goal": to_robot([*gw, 0.35])[:2].tolist()}  # fmt: skip
+            if stop is not None:
+                rec["truth"] = {"x": float(stop[0]), "y": float(stop[1]), "theta": 0.0}
+            log.write(rec)
+        log.write({"type": "event", "event": "goal_skipped", "goal_index": 4})  # old log
+    inside_box = lambda xy: not (0.9 <= xy[0] <= 1.7 and 0.9 <= xy[1] <= 1.7)  # noqa: E731
+    gt = goal_truth([cap, tmp_path / "r1.jsonl"], sim, inside_box)
+    assert [g["reachable"] for g in gt["goals"]] == [True, True, False, True, None]
+    assert gt["reachable"] == 3 and gt["unknown"] == 1
+    assert gt["goals"][0]["true_distance_m"] == pytest.approx(0.05, abs=1e-3)
+    assert gt["goals"][1]["true_distance_m"] == pytest.approx(0.30, abs=1e-3)
+    assert gt["reached_within"] == 1
+    assert gt["reached_within_fraction_of_reachable"] == pytest.approx(1 / 3)
 
 
 def test_the_stage_writes_the_round_evaluation(tmp_path, scene, surf):

@@ -79,11 +79,43 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def cmd_validity(args) -> int:
+    from scenebot.evaluate.validity import ValidityInputs, run_validity
+
+    cfg, ecfg = load_settings(args)
+    cfg.evaluate = ecfg
+    scene_dir = Path(args.scene_dir)
+    r = ecfg.validity_round if args.round is None else args.round
+    if r > args.dense_round:
+        raise ValueError(
+            f"score validity of round {r}: the campaign's dense cloud comes from round "
+            f"{args.dense_round}, before it; set evaluate.validity_round <= {args.dense_round}"
+        )
+    rdir = scene_dir / f"round_{r:03d}"
+    inputs = ValidityInputs(
+        round_dir=rdir,
+        image_dir=scene_dir,
+        captures=[scene_dir / f"round_{k:03d}" / "capture" for k in range(r + 1)],
+        dense_ply=Path(args.dense),
+        dense_sfm_dir=scene_dir / f"round_{args.dense_round:03d}" / "sfm",
+    )
+    out = Path(args.out)
+    s = run_validity(cfg, inputs, out, out.with_suffix(".png"))
+    lo, hi = s["spearman_95ci"]
+    print(
+        f"score validity ({s['round']}, {s['candidates']} views): Spearman(score, PSNR) = "
+        f"{s['spearman_score_psnr']:.3f} [95% {lo:.3f}, {hi:.3f}], median PSNR "
+        f"{s['psnr_db']['median']:.1f} dB, {s['seconds']:.0f} s"
+    )
+    return 0
+
+
 def add_parsers(sub) -> None:
-    """Add the ``observable`` and ``evaluate`` sub-commands to an argparse sub-parser set."""
+    """Add the ``observable``, ``evaluate`` and ``validity`` sub-commands to a sub-parser set."""
     o = sub.add_parser("observable", help="observable surface of the simulated scene (cached)")
     e = sub.add_parser("evaluate", help="one round against the simulator's truth")
-    for sp in (o, e):
+    v = sub.add_parser("validity", help="heuristic score vs ULR render quality (simulator)")
+    for sp in (o, e, v):
         sp.add_argument("--config", default="config.yaml", help="campaign config (YAML)")
         sp.add_argument("--params", help="stage parameters as JSON (used by the workflow)")
     o.add_argument("--out", required=True, help="eval/observable_surface.npz")
@@ -95,6 +127,12 @@ def add_parsers(sub) -> None:
     e.add_argument("--observable", help="observable-surface cache (default: <scene>/eval/...)")
     e.add_argument("--out", help="evaluation.json (default: <scene>/round_XXX/evaluation.json)")
     e.set_defaults(func=cmd_evaluate)
+    v.add_argument("--scene-dir", required=True, help="results/<scene>")
+    v.add_argument("--round", type=int, help="round studied (default: evaluate.validity_round)")
+    v.add_argument("--dense", required=True, help="the campaign's fused cloud (PLY)")
+    v.add_argument("--dense-round", type=int, required=True, help="round the cloud was made in")
+    v.add_argument("--out", required=True, help="score_validity.json (the PNG goes beside it)")
+    v.set_defaults(func=cmd_validity)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -51,7 +51,24 @@ class EvaluateConfig(BaseModel):
         ge=1000,
         description="A denser fused cloud is randomly subsampled (seeded) to this many points.",
     )
-    seed: int = Field(0, description="Seed of the surface sampling and cloud subsampling.")
+    seed: int = Field(
+        0, description="Seed of the surface sampling, cloud subsampling and validity draws."
+    )
+    validity_candidates: int = Field(
+        200,
+        ge=0,
+        description="Score validity: random scored candidates of the validity round rendered "
+        "by ULR and by the simulator (0: no study).",
+    )
+    validity_round: int = Field(
+        0, ge=0, description="Score validity: the round whose map, photos and scores are used."
+    )
+    validity_width: int = Field(
+        320, ge=16, description="Score validity: width of the compared renders (pixels)."
+    )
+    validity_height: int = Field(
+        240, ge=12, description="Score validity: height of the compared renders (pixels)."
+    )
     plots: bool = Field(True, description="Write the PNG pictures.")
 
     @field_validator("thresholds_m")

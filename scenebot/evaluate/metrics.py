@@ -224,6 +224,58 @@ def capture_stats(captures: Sequence[Path]) -> dict:
     }
 
 
+def goal_truth(captures: Sequence[Path], sim: Similarity, reachable, reach_m: float = 0.10) -> dict:
+    """Every goal of the adaptive rounds against the truth: could the robot get there, and
+    how far from it did it truly stop.
+
+    A goal is *reachable* when the robot position it asks for (``robot_goal``, map frame,
+    moved to the world by ``sim``) lies in the free space connected to the start for the
+    robot's footprint (``reachable``: world (x, y) -> bool). Goal events written before
+    abandoned and skipped goals carried ``robot_goal`` count as unknown.
+
+    Args:
+        captures: capture folders (or logs) of rounds 0..r.
+        sim: robot frame -> world similarity of the round's map (previous rounds' poses stay
+            fixed in later maps, so every round's goals share its frame).
+        reachable: predicate on a world (x, y).
+        reach_m: a goal counts as reached when the robot truly stopped within this (m).
+
+    Returns:
+        ``{"goals": [per goal: round, index, event, reachable, true_distance_m], "reachable",
+        "reached_within", "reached_within_fraction_of_reachable", "reach_m",
+        "true_distance_m"}`` (summary of the reached goals' true distances).
+    """
+    rows = []
+    for r, cap in enumerate(captures):
+        for rec in read_log(_log_path(cap)):
+            if rec.get("type") != "event" or rec.get("event") not in GOAL_EVENTS:
+                continue
+            g = rec.get("robot_goal")
+            row = {"round": r, "index": rec.get("goal_index"), "event": rec["event"],
+                   "reachable": None, "true_distance_m": None}  # fmt: skip
+            if g is not None:
+                gw = sim.apply(np.array([[float(g[0]), float(g[1]), 0.0]]))[0, :2]
+                row["reachable"] = bool(reachable(gw))
+                tr = rec.get("truth")
+                if rec["event"] == "goal_reached" and tr is not None:
+                    row["true_distance_m"] = float(math.hypot(tr["x"] - gw[0], tr["y"] - gw[1]))
+            rows.append(row)
+    reach = [x for x in rows if x["reachable"]]
+    within = [
+        x for x in reach if x["true_distance_m"] is not None and x["true_distance_m"] <= reach_m
+    ]
+    dists = [x["true_distance_m"] for x in rows if x["true_distance_m"] is not None]
+    return {
+        "goals": rows,
+        "reachable": len(reach),
+        "unknown": sum(1 for x in rows if x["reachable"] is None),
+        "reached_within": len(within),
+        "reached_within_fraction_of_reachable": len(within) / len(reach) if reach else None,
+        "reach_m": reach_m,
+        "true_distance_m": summary_stats(np.array(dists)) if dists else None,
+    }
+
+
 def _loc_error(loc: dict, tr: dict, sim: Similarity) -> tuple[float, float | None] | None:
     """(position error (m), heading error (rad) or None) of one map-frame estimate."""
     if "center" in loc and "center" in tr:

@@ -31,6 +31,7 @@ from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.metrics import (
     EvaluationError,
     capture_stats,
+    goal_truth,
     localization_accuracy,
     read_cloud,
     robot_to_world,
@@ -130,6 +131,21 @@ def run_observable(cfg, outputs: ObservableOutputs, ecfg: EvaluateConfig | None 
     return {**surf.summary(), "cached": cached, "seconds": time.perf_counter() - t0}
 
 
+def _reachable_test(cfg, sc):
+    """World (x, y) -> whether the robot's centre can stand there, connected to the start."""
+    from scenebot.evaluate.observable import collision_map, reachable_mask, start_pose
+
+    cmap = collision_map(sc, cfg.sim)
+    st = start_pose(sc, cfg.world, cmap)
+    mask = reachable_mask(cmap, (st.x, st.y), cfg.sim.body.radius_m)
+
+    def test(xy) -> bool:
+        r, c = cmap._cell(xy)
+        return bool(0 <= r < mask.shape[0] and 0 <= c < mask.shape[1] and mask[r, c])
+
+    return test
+
+
 def _round_of(sfm_dir: Path) -> int | None:
     for part in reversed(Path(sfm_dir).parts):
         m = re.fullmatch(r"round_(\d+)", part)
@@ -185,6 +201,7 @@ def run(
         "sfm": _sfm_summary(inputs.sfm_dir),
         "alignment": None,
         "localization": None,
+        "goals_truth": None,
         "observable": None,
         "dense": None,
         "notes": [],
@@ -198,6 +215,7 @@ def run(
             sim = robot_to_world(inputs.sfm_dir, caps)
             out["alignment"] = sim.as_dict()
             out["localization"] = localization_accuracy(caps, sim)
+            out["goals_truth"] = goal_truth(caps, sim, _reachable_test(cfg, _scene(cfg, scene)))
         except EvaluationError as exc:
             out["notes"].append(str(exc))
     surf = cloud = None
@@ -314,6 +332,12 @@ def main_summary(ev: dict) -> str:
     g = ev["capture"]["goals"]
     if g["attempted"]:
         lines.append(f"goals reached {g['reached']}/{g['attempted']}")
+    gt = ev.get("goals_truth") or {}
+    if gt.get("reachable"):
+        lines.append(
+            f"truly reachable goals reached within {100 * gt['reach_m']:.0f} cm "
+            f"{gt['reached_within']}/{gt['reachable']}"
+        )
     if ev.get("sfm") and "position_error_m" in ev["sfm"]:
         lines.append(
             f"sfm median position error {100 * ev['sfm']['position_error_m']['median']:.2f} cm"

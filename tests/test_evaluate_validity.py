@@ -1,0 +1,65 @@
+"""Score validity helpers: rank correlation, its bootstrap interval, candidate draws, poses."""
+
+import numpy as np
+import pytest
+
+from scenebot.evaluate.metrics import EvaluationError
+from scenebot.evaluate.validity import (
+    _candidate_pose,
+    bootstrap_interval,
+    pick_candidates,
+    spearman,
+)
+
+
+def test_spearman_is_a_rank_statistic():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=200)
+    b = -2.0 * a + rng.normal(scale=0.5, size=200)
+    rho = spearman(a, b)
+    assert -1.0 <= rho < -0.8
+    # any increasing transform of either variable leaves it unchanged
+    assert spearman(np.exp(a), b**3) == pytest.approx(rho)
+    assert spearman(a, -b) == pytest.approx(-rho)
+    assert np.isnan(spearman(a[:2], b[:2]))
+    assert np.isnan(spearman(np.ones(10), np.arange(10)))
+
+
+def test_bootstrap_interval_brackets_the_estimate_and_shrinks_with_more_pairs():
+    rng = np.random.default_rng(1)
+
+    def sample(n):
+        a = rng.normal(size=n)
+        return a, a + rng.normal(scale=1.0, size=n)
+
+    lo_s, hi_s = bootstrap_interval(*sample(30), seed=0)
+    a, b = sample(600)
+    lo, hi = bootstrap_interval(a, b, seed=0)
+    assert lo <= spearman(a, b) <= hi
+    assert hi - lo < hi_s - lo_s
+    assert -1.0 <= lo_s <= hi_s <= 1.0
+
+
+def test_pick_candidates_keeps_only_scored_views_that_hit_the_mesh():
+    n = 50
+    cands = {
+        "score_deg": np.where(np.arange(n) % 5 == 0, np.nan, np.linspace(5, 120, n)),
+        "hit_fraction": np.where(np.arange(n) % 7 == 0, 0.05, 0.9),
+    }
+    got = pick_candidates(cands, 20, 0.2, seed=3)
+    assert len(got) == 20 == len(set(got.tolist()))
+    assert np.all(np.isfinite(cands["score_deg"][got]))
+    assert np.all(cands["hit_fraction"][got] >= 0.2)
+    np.testing.assert_array_equal(got, pick_candidates(cands, 20, 0.2, seed=3))  # seeded
+    assert len(pick_candidates(cands, 1000, 0.2, seed=3)) < n  # all usable ones, no more
+    with pytest.raises(EvaluationError, match="n_candidates"):
+        pick_candidates({k: v[:2] for k, v in cands.items()}, 10, 0.2, seed=0)
+
+
+def test_candidate_pose_is_the_score_stage_camera():
+    """Centre at (x, y, 0), looking along theta, image y axis down (world -z)."""
+    R, t = _candidate_pose(1.5, -0.5, np.pi / 2)
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(-R.T @ t, [1.5, -0.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(R[2], [0.0, 1.0, 0.0], atol=1e-12)  # forward
+    np.testing.assert_allclose(R[1], [0.0, 0.0, -1.0], atol=1e-12)  # down
