@@ -87,6 +87,7 @@ rule score:
 rule goals:
     input:
         code=stage_code("goals"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
         candidates=f"{RESULTS}/round_{{r}}/candidates.csv",
         freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
     output:

@@ -78,7 +78,7 @@ def cmd_goals(args) -> int:
     from scenebot.score.stage import GoalsInputs, GoalsOutputs, run_goals
 
     cfg, r = _config(args), Path(args.round_dir)
-    inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz")
+    inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz", r / "sfm")
     print(json.dumps(run_goals(cfg.goals, inputs, GoalsOutputs(r / "goals.json", r / "goals.png"))))
     return 0
 

@@ -93,7 +93,21 @@ class GoalsConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
+    method: Literal["score", "frontier"] = Field(
+        "score",
+        description="score: the paper's heuristic (poorest predicted rendering first); "
+        "frontier: the baseline, nearest boundary between seen and unseen free space first.",
+    )
     k: int = Field(5, ge=1, description="Most goals chosen per round (count).")
+    frontier_range_m: float = Field(
+        3.0, gt=0, description="frontier: a photo sees free space up to this distance (m)."
+    )
+    frontier_min_area_m2: float = Field(
+        0.25, ge=0, description="frontier: unseen free space in smaller pieces is ignored (m^2)."
+    )
+    frontier_look_m: float = Field(
+        1.0, gt=0, description="frontier: a goal looks at the unseen free space this near (m)."
+    )
     nms_radius_m: float = Field(
         0.5, ge=0.0, description="Two goals closer than this (m) must differ in heading."
     )

@@ -77,6 +77,48 @@ def plot_goals(
     plt.close(fig)
 
 
+def plot_frontier(
+    path: str | Path,
+    fs: FreeSpace,
+    seen: np.ndarray,
+    frontier: np.ndarray,
+    centres: np.ndarray,
+    goals: list[dict],
+    title: str,
+) -> None:
+    """The frontier baseline's decision: seen and unseen free space, the frontier cells, the
+    cameras and the chosen goals as arrows along their headings."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 6))
+    img = np.zeros((*fs.mask.shape, 4))
+    img[fs.mask & ~seen] = (0.85, 0.55, 0.2, 0.6)  # unseen free: orange
+    img[seen] = (0.3, 0.6, 0.9, 0.45)  # seen free: blue
+    img[frontier] = (0.8, 0.0, 0.6, 1.0)  # frontier: magenta
+    ny, nx = fs.mask.shape
+    ext = [fs.origin[0], fs.origin[0] + nx * fs.resolution,
+           fs.origin[1], fs.origin[1] + ny * fs.resolution]  # fmt: skip
+    _draw_freespace(ax, fs)
+    ax.imshow(img, origin="lower", extent=ext, interpolation="nearest", zorder=3)
+    if len(centres):
+        ax.plot(centres[:, 0], centres[:, 1], ".", color="k", ms=3, zorder=4)
+    L = 0.35
+    for r, g in enumerate(goals):
+        x, y, t = g["x"], g["y"], g["theta"]
+        ax.annotate(
+            "",
+            xy=(x + L * np.cos(t), y + L * np.sin(t)),
+            xytext=(x, y),
+            arrowprops={"arrowstyle": "-|>", "color": "lime", "lw": 2},
+            zorder=5,
+        )
+        ax.text(x, y, str(r), color="lime", fontsize=9, ha="right", va="top", zorder=5)
+    ax.set_aspect("equal")
+    ax.set_title(title + "\nblue: seen free space, orange: unseen, magenta: frontier")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def plot_top_views(
     path: str | Path, depth: np.ndarray, pixels: np.ndarray, scores: np.ndarray, title: str
 ) -> None:

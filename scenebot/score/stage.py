@@ -180,6 +180,7 @@ class GoalsInputs:
 
     candidates_csv: Path
     freespace_npz: Path
+    sfm_dir: Path | None = None  # the map (camera poses); the frontier method needs it
 
 
 @dataclass
@@ -206,6 +207,8 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     fs = FreeSpace.load(inputs.freespace_npz)
     valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & fs.contains(poses[:, :2])
     score = np.where(valid, cols["score_deg"], np.nan)
+    if cfg.method == "frontier":
+        return _frontier_goals(cfg, inputs, outputs, fs, score, where)
     chosen = select_goals(poses, score, cfg.k, cfg.nms_radius_m, cfg.nms_angle_deg, valid)
     doc = goals_document(
         poses,
@@ -225,4 +228,54 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
 
         title = f"{where}: goals (complete={doc['complete']})"
         plot_goals(outputs.goals_png, fs, poses, score, chosen, title)
+    return doc
+
+
+def _goal_record(rank: int, g: dict) -> dict:
+    x, y, t = round(g["x"], 4), round(g["y"], 4), round(g["theta"], 5)
+    return {"rank": rank, "candidate": None, "x": x, "y": y, "theta": t, "score_deg": None}
+
+
+def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, fs: FreeSpace,
+                    score: np.ndarray, where: str) -> dict:  # fmt: skip
+    """The frontier baseline (``goals.method: frontier``): see :mod:`scenebot.score.frontier`.
+
+    The candidates' scores are still reported (``best_score_deg``) so campaigns compare, but
+    they choose nothing; the map is complete when no frontier is left.
+    """
+    from scenebot.plan.stage import read_map_geometry
+    from scenebot.score.frontier import frontier_cells, frontier_goals, seen_cells
+
+    if inputs.sfm_dir is None:
+        raise ValueError(f"{where}: goals.method=frontier needs the map (round_XXX/sfm)")
+    _, centres, _, headings = read_map_geometry(inputs.sfm_dir, with_headings=True)
+    smap = read_sparse_map(inputs.sfm_dir)
+    intr = smap.intrinsics[0]
+    hfov = float(np.degrees(2 * np.arctan(0.5 * intr.width / intr.fx)))
+    seen = seen_cells(fs, centres[:, :2], headings, hfov, cfg.frontier_range_m)
+    area = cfg.frontier_min_area_m2
+    goals = frontier_goals(
+        fs, seen, centres[-1, :2], cfg.k, cfg.nms_radius_m, cfg.frontier_look_m, area
+    )
+    finite = np.isfinite(score)
+    doc = {
+        "round": where,
+        "method": "frontier",
+        "complete": not goals,
+        "best_score_deg": round(float(np.max(score[finite])), 4) if finite.any() else None,
+        "threshold_deg": cfg.complete_threshold_deg,
+        "n_candidates": len(score),
+        "pose_convention": "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)",
+        "seen_free_fraction": float(seen.sum() / max(fs.mask.sum(), 1)),
+        "goals": [_goal_record(r, g) for r, g in enumerate(goals)],
+    }
+    write_goals(outputs.goals_json, doc)
+    if outputs.goals_png is not None:
+        from scenebot.score.plots import plot_frontier
+
+        plot_frontier(
+            outputs.goals_png, fs, seen, frontier_cells(fs, seen, area), centres[:, :2], goals,
+            f"{where}: frontier goals (complete={doc['complete']}, "
+            f"{100 * doc['seen_free_fraction']:.0f}% of the free space seen)",
+        )  # fmt: skip
     return doc

@@ -1,0 +1,139 @@
+"""A frontier-style goal chooser: the baseline the paper's score is measured against.
+
+Classic frontier exploration (Yamauchi 1997) sends the robot to the boundary between free
+space it has seen and free space it has not, nearest first. Here, on the round's free space
+(the map's mesh cut by the camera plane, :mod:`scenebot.score.freespace`):
+
+* a free cell is *seen* when it lies inside some photo's field of view within
+  ``goals.frontier_range_m`` of the camera, with a line of sight through free cells;
+* *frontier* cells are seen free cells next to unseen free cells (4-neighbours), where unseen
+  pieces smaller than ``goals.frontier_min_area_m2`` do not count;
+* goals: from the robot's last position, repeatedly the nearest frontier cell (straight-line
+  distance), looking at the unseen cells around it (mean direction of the unseen free cells
+  within ``goals.frontier_look_m``); frontier cells within ``goals.nms_radius_m`` of a chosen
+  goal are dropped; the next search starts at the chosen goal;
+* exploration is complete when no frontier is left.
+
+It uses neither the rendering-quality score nor the photos' content: only where the cameras
+stood and looked.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scenebot.score.freespace import FreeSpace
+
+
+def seen_cells(
+    fs: FreeSpace,
+    centres: np.ndarray,
+    headings: np.ndarray,
+    hfov_deg: float,
+    range_m: float,
+    rays: int = 48,
+) -> np.ndarray:
+    """Free cells inside some camera's horizontal field of view and range, in line of sight.
+
+    Args:
+        fs: the free space (its non-free cells block the view).
+        centres: (N, 2) camera centres (m).
+        headings: (N,) viewing directions (rad).
+        hfov_deg: horizontal field of view (degrees).
+        range_m: how far a camera counts as seeing (m).
+        rays: rays per camera across the field of view.
+
+    Returns:
+        (ny, nx) bool, True = seen free cell.
+    """
+    import cv2
+
+    ny, nx = fs.mask.shape
+    out = np.zeros((ny, nx), np.uint8)
+    res = fs.resolution
+    half = np.radians(hfov_deg) / 2
+    steps = np.arange(0.5, range_m / res + 0.5, 0.5)  # in cells
+    for c_xy, h in zip(np.asarray(centres, float), np.asarray(headings, float), strict=True):
+        c = (c_xy - fs.origin) / res
+        ang = h + np.linspace(-half, half, rays)
+        d = np.stack([np.cos(ang), np.sin(ang)], 1)
+        q = c[None, None, :] + steps[None, :, None] * d[:, None, :]  # (rays, steps, 2)
+        ij = np.floor(q).astype(np.int64)
+        inside = (ij[..., 0] >= 0) & (ij[..., 1] >= 0) & (ij[..., 0] < nx) & (ij[..., 1] < ny)
+        blocked = ~inside
+        blocked[inside] = ~fs.mask[ij[..., 1][inside], ij[..., 0][inside]]
+        # the camera's own cell may be marked non-free (clearance): ignore the first half cell
+        blocked[:, 0] = False
+        hit = blocked.any(axis=1)
+        end = np.where(hit, steps[blocked.argmax(axis=1)], steps[-1])
+        ends = c + end[:, None] * d
+        poly = np.vstack([c[None], ends])
+        cv2.fillPoly(out, [np.round(poly - 0.5).astype(np.int32).reshape(-1, 1, 2)], 1)
+    return out.astype(bool) & fs.mask
+
+
+def unseen_cells(fs: FreeSpace, seen: np.ndarray, min_area_m2: float = 0.0) -> np.ndarray:
+    """Unseen free cells, without unseen pieces smaller than ``min_area_m2`` (slivers between
+    two photos' fields of view are not worth a trip): (ny, nx) bool."""
+    import cv2
+
+    unseen = fs.mask & ~seen
+    if min_area_m2 <= 0 or not unseen.any():
+        return unseen
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(unseen.astype(np.uint8), connectivity=4)
+    big = stats[:, cv2.CC_STAT_AREA] * fs.resolution**2 >= min_area_m2
+    big[0] = False  # background
+    return big[lab] & unseen
+
+
+def frontier_cells(fs: FreeSpace, seen: np.ndarray, min_area_m2: float = 0.0) -> np.ndarray:
+    """Seen free cells with an unseen free 4-neighbour (see :func:`unseen_cells`): (ny, nx)."""
+    unseen = unseen_cells(fs, seen, min_area_m2)
+    nb = np.zeros_like(unseen)
+    nb[1:, :] |= unseen[:-1, :]
+    nb[:-1, :] |= unseen[1:, :]
+    nb[:, 1:] |= unseen[:, :-1]
+    nb[:, :-1] |= unseen[:, 1:]
+    return seen & nb
+
+
+def frontier_goals(
+    fs: FreeSpace,
+    seen: np.ndarray,
+    start_xy: np.ndarray,
+    k: int,
+    spacing_m: float,
+    look_m: float,
+    min_area_m2: float = 0.0,
+) -> list[dict]:
+    """Up to ``k`` frontier goals, nearest first from ``start_xy``, each looking at the unseen.
+
+    Returns:
+        Goals ``{"x", "y", "theta", "frontier_cells"}`` (m, rad); empty when no frontier is
+        left. A goal must pass :meth:`FreeSpace.contains` (clearance from the walls).
+    """
+    front = frontier_cells(fs, seen, min_area_m2)
+    jj, ii = np.nonzero(front)
+    if len(jj) == 0:
+        return []
+    res = fs.resolution
+    pts = fs.origin + (np.stack([ii, jj], 1) + 0.5) * res
+    pts = pts[fs.contains(pts)]
+    uj, ui = np.nonzero(unseen_cells(fs, seen, min_area_m2))
+    unseen = fs.origin + (np.stack([ui, uj], 1) + 0.5) * res
+    goals: list[dict] = []
+    here = np.asarray(start_xy, float)
+    alive = np.ones(len(pts), bool)
+    while len(goals) < k and alive.any():
+        idx = np.flatnonzero(alive)
+        j = idx[np.argmin(np.hypot(*(pts[idx] - here).T))]
+        p = pts[j]
+        near = unseen[np.hypot(*(unseen - p).T) <= look_m]
+        v = (near - p).mean(axis=0) if len(near) else np.zeros(2)
+        theta = float(np.arctan2(v[1], v[0])) if np.hypot(*v) > 1e-9 else 0.0
+        goals.append(
+            {"x": float(p[0]), "y": float(p[1]), "theta": theta, "frontier_cells": len(pts)}
+        )
+        alive &= np.hypot(*(pts - p).T) > spacing_m
+        here = p
+    return goals
