@@ -33,7 +33,12 @@ STAGE_CODE = {
         "score/stage.py",
     ],
     "score": ["score"],
-    "goals": ["score/goals.py", "score/frontier.py", "score/plots.py", "score/stage.py"],
+    "goals": [
+        "score/goals.py",
+        "score/frontier.py",
+        "score/plots.py",
+        "score/stage.py",
+    ],
     "plan": ["plan", "score/geometry.py"],
     "dense": ["dense"],
     "campaign": ["campaign.py", "capturelog.py"],

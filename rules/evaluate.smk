@@ -120,3 +120,29 @@ rule validity:
         "{params.py:q} -m scenebot validity --params {params.cfg:q} "
         "--scene-dir {params.scene_dir:q} --round {params.round} --dense {input.dense:q} "
         "--dense-round {params.dense_round} --out {output.json:q} 2> >(tee {log:q} >&2)"
+
+
+# `snakemake --cores 2 baselines` (on demand: two more campaigns): random exploration only
+# and the frontier chooser at the campaign's photo budget, each a full campaign in
+# results/{scene}/baselines/<name>/, compared by dense completeness against the truth.
+rule baselines:
+    input:
+        code=stage_code("evaluate"),
+        final=f"{RESULTS}/final/evaluation.json",
+        campaign=f"{RESULTS}/campaign.json",
+    output:
+        json=f"{RESULTS}/baselines/baselines.json",
+        png=f"{RESULTS}/baselines/baselines.png",
+    log:
+        f"{RESULTS}/logs/baselines.log",
+    conda:
+        "../envs/scenebot.yaml"
+    threads: workflow.cores
+    params:
+        py=PY,
+        campaign=json.dumps(config),
+        scene_dir=lambda w, input: Path(input.campaign).parent,
+    shell:
+        "{params.py:q} -m scenebot baselines --campaign {params.campaign:q} "
+        "--scene-dir {params.scene_dir:q} --cores {threads} --out {output.json:q} "
+        "2> >(tee {log:q} >&2)"

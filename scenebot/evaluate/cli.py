@@ -110,8 +110,23 @@ def cmd_validity(args) -> int:
     return 0
 
 
+def cmd_baselines(args) -> int:
+    from scenebot.evaluate.baselines import run_baselines
+
+    campaign = json.loads(args.campaign)
+    methods = tuple(m for m in args.methods.split(",") if m)
+    s = run_baselines(campaign, Path(args.scene_dir), Path(args.out), methods, args.cores)
+    for name, v in s.items():
+        if isinstance(v, dict) and v.get("dense"):
+            d = v["dense"].get("2cm", {})
+            print(f"{name}: {v['photos']} photos, completeness at 2 cm "
+                  f"{100 * d.get('completeness', float('nan')):.1f}%, accuracy "
+                  f"{100 * d.get('accuracy', float('nan')):.1f}%")  # fmt: skip
+    return 0
+
+
 def add_parsers(sub) -> None:
-    """Add the ``observable``, ``evaluate`` and ``validity`` sub-commands to a sub-parser set."""
+    """Add ``observable``, ``evaluate``, ``validity`` and ``baselines`` to a sub-parser set."""
     o = sub.add_parser("observable", help="observable surface of the simulated scene (cached)")
     e = sub.add_parser("evaluate", help="one round against the simulator's truth")
     v = sub.add_parser("validity", help="heuristic score vs ULR render quality (simulator)")
@@ -133,6 +148,13 @@ def add_parsers(sub) -> None:
     v.add_argument("--dense-round", type=int, required=True, help="round the cloud was made in")
     v.add_argument("--out", required=True, help="score_validity.json (the PNG goes beside it)")
     v.set_defaults(func=cmd_validity)
+    b = sub.add_parser("baselines", help="random and frontier campaigns at the same budget")
+    b.add_argument("--campaign", required=True, help="the campaign's config as JSON")
+    b.add_argument("--scene-dir", required=True, help="results/<scene> of the campaign")
+    b.add_argument("--methods", default="random,frontier", help="comma-separated baselines")
+    b.add_argument("--cores", type=int, default=2, help="cores of the nested runs")
+    b.add_argument("--out", required=True, help="baselines.json (the PNG goes beside it)")
+    b.set_defaults(func=cmd_baselines)
 
 
 def main(argv: list[str] | None = None) -> int:
