@@ -63,3 +63,21 @@ def test_candidate_pose_is_the_score_stage_camera():
     np.testing.assert_allclose(-R.T @ t, [1.5, -0.5, 0.0], atol=1e-12)
     np.testing.assert_allclose(R[2], [0.0, 1.0, 0.0], atol=1e-12)  # forward
     np.testing.assert_allclose(R[1], [0.0, 0.0, -1.0], atol=1e-12)  # down
+
+
+def test_baseline_configs_keep_the_campaign_and_change_only_the_method():
+    from scenebot.config import validate_config
+    from scenebot.evaluate.baselines import baseline_config
+
+    campaign = {"scene": "office", "max_rounds": 3, "exploration": {"photos": 100},
+                "goals": {"k": 5}}  # fmt: skip
+    rnd = baseline_config(campaign, "random", 140)
+    assert rnd["max_rounds"] == 1 and rnd["exploration"]["photos"] == 140
+    fr = baseline_config(campaign, "frontier", 140)
+    assert fr["goals"] == {"k": 5, "method": "frontier"} and fr["max_rounds"] == 3
+    assert campaign["goals"] == {"k": 5}  # the campaign's own config is not touched
+    for cfg in (rnd, fr):
+        assert cfg["evaluate"]["validity_candidates"] == 0
+        validate_config(cfg, "baseline")  # a valid campaign config
+    with pytest.raises(ValueError, match="unknown baseline"):
+        baseline_config(campaign, "oracle", 140)
