@@ -104,7 +104,7 @@ def run_baselines(
     snakefile = snakefile or Path(__file__).resolve().parents[2] / "Snakefile"
     out = {"adaptive": adaptive}
     for method in methods:
-        work = scene_dir / "baselines" / method
+        work = (scene_dir / "baselines" / method).resolve()
         work.mkdir(parents=True, exist_ok=True)
         cfg = baseline_config(campaign_cfg, method, adaptive["photos"])
         (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
