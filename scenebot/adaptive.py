@@ -31,6 +31,7 @@ import json
 import logging
 import math
 import os
+import re
 import stat
 import tempfile
 from pathlib import Path
@@ -113,6 +114,26 @@ def map_end_pose(sfm_dir: Path, camera_offset_m: tuple[float, float]) -> Pose2D:
     return Pose2D(float(x), float(y), th % (2 * math.pi))
 
 
+def map_heading_from_compass(sfm_dir: Path) -> bool:
+    """Whether a map's x axis is compass heading 0: its ``report.json`` says the heading came
+    from the compass, or from the previous round's map whose heading did (followed back)."""
+    sfm_dir = Path(sfm_dir)
+    for _ in range(1000):
+        rep = sfm_dir / "report.json"
+        if not rep.is_file():
+            return False
+        src = (json.loads(rep.read_text(encoding="utf-8")).get("alignment") or {}).get(
+            "heading_source"
+        )
+        if src != "previous_model":
+            return src == "compass"
+        m = re.fullmatch(r"round_(\d+)", sfm_dir.parent.name)
+        if m is None or int(m.group(1)) == 0:
+            return False
+        sfm_dir = sfm_dir.parents[1] / f"round_{int(m.group(1)) - 1:03d}" / "sfm"
+    return False
+
+
 class SnappingPlanner:
     """A :class:`~scenebot.plan.path.GridPlanner` whose goals move off obstacle cells: a bump
     near a goal marks a disk there, and the goal then moves to the nearest free cell within
@@ -160,7 +181,7 @@ def _photo_at(follower, robot, camera, capture_dir: Path, name: str, localize: b
     rec = {"image": name, **reading.as_record()}
     source = "odometry since the last fix"
     if localize:
-        est = follower.localize_photo(path, reading.odometry)
+        est = follower.localize_photo(path, reading.odometry, reading.compass_deg)
         rec["localization_inliers"] = int(est.num_inliers)
         rec["localization_ok"] = bool(est.ok)
         if est.ok:
@@ -219,6 +240,9 @@ def run_adaptive(
     goals_doc = json.loads(need["goals"].read_text(encoding="utf-8"))
     paths_doc = json.loads(need["paths"].read_text(encoding="utf-8"))
     fcfg, acfg = cfg.follow, cfg.adaptive
+    if fcfg.compass_gate_deg > 0 and not map_heading_from_compass(prev / "sfm"):
+        log.info("the map's heading does not come from the compass: no compass check of fixes")
+        fcfg = fcfg.model_copy(update={"compass_gate_deg": 0.0})
     per_goal = acfg.circle_photos if acfg.pattern == "circle" else acfg.fan_photos
     paths = paths_doc.get("paths", [])
     budget = min(acfg.max_photos, per_goal * len(paths))

@@ -241,6 +241,14 @@ class FollowConfig(_Model):
     gate_deg: float = Field(
         25.0, ge=0, description="A fix whose heading differs more (deg) from odometry is rejected."
     )
+    compass_gate_deg: float = Field(
+        45.0,
+        ge=0,
+        description="A fix whose heading differs more (deg) from the compass is rejected "
+        "outright, even when a second fix agrees: the map's x axis is compass heading 0, and "
+        "a repeated texture seen from the opposite side gives confident, mutually agreeing "
+        "fixes about 180 deg off. 0: no compass check.",
+    )
     turn_to_goal_heading: bool = Field(
         True, description="At the goal, turn to the goal's heading when it has one."
     )

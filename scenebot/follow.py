@@ -192,21 +192,44 @@ class PathFollower:
         """Take a photo and localize it; on success it becomes the new fix."""
         dest = self.photo_dir / f"nav_g{self._goal_index:03d}_{self._photo_count:04d}.jpg"
         self._photo_count += 1
-        odo = self.robot.sense().odometry
+        reading = self.robot.sense()
         path = self.camera.capture(dest)
-        return self.localize_photo(path, odo)
+        return self.localize_photo(path, reading.odometry, reading.compass_deg)
 
-    def localize_photo(self, path: Path, odo: Pose2D) -> PoseEstimate | LocalizationFailure:
+    def localize_photo(
+        self, path: Path, odo: Pose2D, compass_deg: float | None = None
+    ) -> PoseEstimate | LocalizationFailure:
         """Localize a photo taken at odometry ``odo``; a consistent fix becomes the new fix.
 
         Args:
             path: the photo.
             odo: the odometry reading when it was taken.
+            compass_deg: the compass reading then (None: no compass check).
         """
         est = self.localizer(path)
         res = self._result
         if est.ok:
             cand = robot_pose_from_camera(est, self.cfg.camera_forward_m, self.cfg.camera_left_m)
+            off = self._compass_disagreement_deg(cand, compass_deg)
+            if off is not None:
+                if res is not None:
+                    res.failed_localizations += 1
+                self._event(
+                    "localize_rejected",
+                    image=str(path),
+                    reason=str(FailureReason.INCONSISTENT_WITH_COMPASS),
+                    compass_deg=compass_deg,
+                    heading_off_deg=off,
+                    candidate=cand.as_dict(),
+                    localization=est.as_record(),
+                )
+                return LocalizationFailure(
+                    FailureReason.INCONSISTENT_WITH_COMPASS,
+                    est.num_features,
+                    est.num_matches,
+                    est.num_inliers,
+                    est.timings_s,
+                )
             if not self._consistent(cand, odo):
                 self._rejected = (cand, odo)
                 if res is not None:
@@ -237,6 +260,15 @@ class PathFollower:
                 res.failed_localizations += 1
             self._event("localize_failed", image=str(path), localization=est.as_record())
         return est
+
+    def _compass_disagreement_deg(self, cand: Pose2D, compass_deg: float | None) -> float | None:
+        """How far (deg) a fix's heading is from the compass when beyond ``compass_gate_deg``,
+        else None. The map's x axis is compass heading 0 (see :mod:`scenebot.sfm.align`)."""
+        gate = self.cfg.compass_gate_deg
+        if gate <= 0 or compass_deg is None or not math.isfinite(compass_deg):
+            return None
+        off = abs(math.degrees(wrap_angle(cand.theta - math.radians(compass_deg))))
+        return off if off > gate else None
 
     def _consistent(self, cand: Pose2D, odo: Pose2D) -> bool:
         """Whether a fix agrees with the odometry prediction, or with the last rejected fix

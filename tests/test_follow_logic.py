@@ -77,7 +77,8 @@ class KinematicRobot(Robot):
         pass
 
     def sense(self):
-        return SensorReading(self.t, 0.0, 255, False, False, self.odo)
+        # the compass reads the true heading (the map's x axis is compass heading 0)
+        return SensorReading(self.t, math.degrees(self.true[2]) % 360, 255, False, False, self.odo)
 
     def health(self):
         return Health(8000, True)
@@ -319,3 +320,47 @@ def test_two_agreeing_fixes_override_a_wrong_initial_pose(tmp_path):
     res = f.follow(np.array([[1.5, 1.0], [2.0, 0.5]]))
     assert res.reached and math.hypot(robot.true[0] - 2.0, robot.true[1] - 0.5) < 0.1
     assert res.failed_localizations >= 1
+
+
+class MirrorLocalizer(OracleLocalizer):
+    """From call ``start`` on, confident fixes turned by 180 degrees and moved (the same
+    texture seen from the other side of the room): consecutive ones agree with each other."""
+
+    def __init__(self, robot, start=2, shift=(1.0, 0.8)):
+        super().__init__(robot)
+        self.start, self.shift = start, np.array([*shift, 0.0])
+
+    def __call__(self, path):
+        k = self.calls
+        est = super().__call__(path)
+        if k < self.start:
+            return est
+        th = math.atan2(est.R[2, 1], est.R[2, 0]) + math.pi
+        R = camera_rotation(th)
+        c = est.center + self.shift
+        return PoseEstimate(R, -R @ c, 520.0, 800, 300, 250, 0.8, "oracle")
+
+
+@pytest.mark.parametrize("gate_deg", [45.0, 0.0])
+def test_mirrored_fixes_are_rejected_by_the_compass_even_when_they_agree(tmp_path, gate_deg):
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.05)
+    with CaptureLog(tmp_path / "log.jsonl") as log:
+        f = PathFollower(
+            robot,
+            NullCamera(),
+            MirrorLocalizer(robot),
+            GridPlanner(_open_grid()),
+            FollowConfig(camera_forward_m=CAM_FWD, compass_gate_deg=gate_deg),
+            tmp_path,
+            log,
+        )
+        res = f.follow(np.array([[0.0, 0.0], [1.5, 0.0], [1.5, 1.5]]))
+    events = list(read_log(tmp_path / "log.jsonl"))
+    by_compass = [r for r in events if r.get("reason") == "inconsistent_with_compass"]
+    accepted = [r for r in events if r["event"] == "localize"]
+    if gate_deg > 0:
+        assert by_compass and all(r["heading_off_deg"] > 135 for r in by_compass)
+        assert len(accepted) == 2  # only the two true fixes before the mirror began
+        assert res.reached and math.hypot(robot.true[0] - 1.5, robot.true[1] - 1.5) < 0.15
+    else:  # without the compass the agreeing mirrored fixes take over
+        assert not by_compass and len(accepted) > 2

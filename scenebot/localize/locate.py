@@ -34,6 +34,7 @@ class FailureReason(enum.StrEnum):
     TOO_FEW_INLIERS = "too_few_inliers"
     IMPLAUSIBLE_POSE = "implausible_pose"
     INCONSISTENT_WITH_ODOMETRY = "inconsistent_with_odometry"
+    INCONSISTENT_WITH_COMPASS = "inconsistent_with_compass"
 
 
 @dataclass(frozen=True)
