@@ -1,6 +1,7 @@
 # scenebot: the two set-up commands of the README, and helpers.
 #   make demo   install everything, run the default campaign (simulated office)
 #   make test   install everything, lint, run the tests (fast and slow; what CI runs)
+#   make report after a campaign: report.html, its pictures, tables, tour video and rule graph
 
 PYTHON ?= python3
 VENV   ?= .venv
@@ -13,7 +14,7 @@ TEST_APT_PACKAGES := chromium chromium-driver
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export TI_SKIP_VERSION_CHECK := ON
 
-.PHONY: demo test test-fast lint format system system-test install clean-results
+.PHONY: demo report test test-fast lint format system system-test install clean-results
 
 system-test: APT_PACKAGES += $(TEST_APT_PACKAGES)
 system-test: system
@@ -37,6 +38,9 @@ install: system $(VENV)/.installed
 
 demo: install
 	$(BIN)/snakemake --cores $(CORES)
+
+report: install
+	$(BIN)/snakemake --report report.html
 
 lint: install
 	$(BIN)/ruff check .

@@ -6,7 +6,12 @@
 rule capture_round0:
     output:
         log=f"{RESULTS}/round_000/capture/log.jsonl",
-        trajectory=f"{RESULTS}/round_000/capture/trajectory.png",
+        trajectory=report(
+            f"{RESULTS}/round_000/capture/trajectory.png",
+            caption="../report/trajectory_round0.rst",
+            category="1. Capture",
+            subcategory="round 000",
+        ),
     log:
         f"{RESULTS}/logs/capture_round0.log",
     benchmark:
@@ -31,7 +36,12 @@ rule capture_adaptive:
         previous=previous_round,
     output:
         log=f"{RESULTS}/round_{{r}}/capture/log.jsonl",
-        trajectory=f"{RESULTS}/round_{{r}}/capture/trajectory.png",
+        trajectory=report(
+            f"{RESULTS}/round_{{r}}/capture/trajectory.png",
+            caption="../report/trajectory.rst",
+            category="1. Capture",
+            subcategory="round {r}",
+        ),
     log:
         f"{RESULTS}/logs/round_{{r}}/capture.log",
     benchmark:

@@ -17,6 +17,12 @@ except ConfigError as exc:
 validate(config, schema="../scenebot/config.schema.json", set_default=False)
 
 PY = sys.executable  # there is no bare `python` on PATH outside the virtualenv
+# the multi-threaded stages take every core of the run; commands that run nothing
+# (--report, --summary, --lint) give no --cores, and the threads then do not matter
+try:
+    ALL_CORES = workflow.cores
+except WorkflowError:
+    ALL_CORES = 1
 SCENE = CFG.scene
 RESULTS = f"results/{SCENE}"
 PKG = Path(workflow.basedir) / "scenebot"

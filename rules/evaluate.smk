@@ -9,7 +9,12 @@ rule observable:
         code=stage_code("evaluate"),
     output:
         npz=f"{RESULTS}/eval/observable_surface.npz",
-        png=f"{RESULTS}/eval/observable_surface.png",
+        png=report(
+            f"{RESULTS}/eval/observable_surface.png",
+            caption="../report/observable_surface.rst",
+            category="6. Evaluation",
+            subcategory="truth",
+        ),
     log:
         f"{RESULTS}/logs/observable.log",
     benchmark:
@@ -33,7 +38,12 @@ rule evaluate:
         captures=captures_until,
     output:
         json=f"{RESULTS}/round_{{r}}/evaluation.json",
-        png=f"{RESULTS}/round_{{r}}/evaluation.png",
+        png=report(
+            f"{RESULTS}/round_{{r}}/evaluation.png",
+            caption="../report/evaluation.rst",
+            category="6. Evaluation",
+            subcategory="round {r}",
+        ),
     log:
         f"{RESULTS}/logs/round_{{r}}/evaluate.log",
     benchmark:
@@ -61,7 +71,12 @@ rule evaluate_final:
         dense=f"{RESULTS}/final/dense/fused.ply",
     output:
         json=f"{RESULTS}/final/evaluation.json",
-        png=f"{RESULTS}/final/evaluation.png",
+        png=report(
+            f"{RESULTS}/final/evaluation.png",
+            caption="../report/evaluation_final.rst",
+            category="6. Evaluation",
+            subcategory="final",
+        ),
     log:
         f"{RESULTS}/logs/evaluate_final.log",
     benchmark:
@@ -102,14 +117,19 @@ rule validity:
         dense_model=last_round_model,
     output:
         json=f"{RESULTS}/final/score_validity.json",
-        png=f"{RESULTS}/final/score_validity.png",
+        png=report(
+            f"{RESULTS}/final/score_validity.png",
+            caption="../report/score_validity.rst",
+            category="6. Evaluation",
+            subcategory="final",
+        ),
     log:
         f"{RESULTS}/logs/validity.log",
     benchmark:
         f"{RESULTS}/benchmarks/validity.tsv"
     conda:
         "../envs/scenebot.yaml"
-    threads: workflow.cores
+    threads: ALL_CORES
     params:
         py=PY,
         cfg=stage_params("world", "sim", "evaluate", "tour", "goals"),
@@ -132,12 +152,17 @@ rule baselines:
         campaign=f"{RESULTS}/campaign.json",
     output:
         json=f"{RESULTS}/baselines/baselines.json",
-        png=f"{RESULTS}/baselines/baselines.png",
+        png=report(
+            f"{RESULTS}/baselines/baselines.png",
+            caption="../report/baselines.rst",
+            category="6. Evaluation",
+            subcategory="baselines",
+        ),
     log:
         f"{RESULTS}/logs/baselines.log",
     conda:
         "../envs/scenebot.yaml"
-    threads: workflow.cores
+    threads: ALL_CORES
     params:
         py=PY,
         campaign=json.dumps(config),

@@ -6,8 +6,16 @@ rule campaign:
         code=stage_code("campaign"),
         rounds=round_products,
     output:
-        summary=f"{RESULTS}/campaign.json",
-        picture=f"{RESULTS}/campaign.png",
+        summary=report(
+            f"{RESULTS}/campaign.json",
+            caption="../report/campaign_json.rst",
+            category="4. Campaign",
+        ),
+        picture=report(
+            f"{RESULTS}/campaign.png",
+            caption="../report/campaign.rst",
+            category="4. Campaign",
+        ),
     log:
         f"{RESULTS}/logs/campaign.log",
     conda:
@@ -35,7 +43,7 @@ rule dense:
         f"{RESULTS}/benchmarks/dense.tsv"
     conda:
         "../envs/scenebot.yaml"
-    threads: workflow.cores
+    threads: ALL_CORES
     params:
         py=PY,
         cfg=stage_params("dense"),

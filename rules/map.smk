@@ -19,7 +19,12 @@ rule sfm:
             "points3D.bin",
             "point_descriptors.npz",
         ),
-        map=f"{RESULTS}/round_{{r}}/sfm/map.png",
+        map=report(
+            f"{RESULTS}/round_{{r}}/sfm/map.png",
+            caption="../report/map.rst",
+            category="2. Map",
+            subcategory="round {r}",
+        ),
         report=f"{RESULTS}/round_{{r}}/sfm/report.json",
     log:
         f"{RESULTS}/logs/round_{{r}}/sfm.log",
@@ -27,7 +32,7 @@ rule sfm:
         f"{RESULTS}/benchmarks/round_{{r}}/sfm.tsv"
     conda:
         "../envs/scenebot.yaml"
-    threads: workflow.cores
+    threads: ALL_CORES
     params:
         py=PY,
         cfg=stage_params("sfm", "photos"),
@@ -43,7 +48,13 @@ rule mesh:
         model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
     output:
         mesh=f"{RESULTS}/round_{{r}}/mesh.ply",
-        freespace=multiext(f"{RESULTS}/round_{{r}}/freespace", ".json", ".npz", ".png"),
+        freespace=multiext(f"{RESULTS}/round_{{r}}/freespace", ".json", ".npz"),
+        picture=report(
+            f"{RESULTS}/round_{{r}}/freespace.png",
+            caption="../report/freespace.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
     log:
         f"{RESULTS}/logs/round_{{r}}/mesh.log",
     benchmark:
@@ -66,15 +77,25 @@ rule score:
         mesh=f"{RESULTS}/round_{{r}}/mesh.ply",
         freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
     output:
-        candidates=f"{RESULTS}/round_{{r}}/candidates.csv",
-        views=f"{RESULTS}/round_{{r}}/score_views.png",
+        candidates=report(
+            f"{RESULTS}/round_{{r}}/candidates.csv",
+            caption="../report/candidates.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
+        views=report(
+            f"{RESULTS}/round_{{r}}/score_views.png",
+            caption="../report/score_views.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
     log:
         f"{RESULTS}/logs/round_{{r}}/score.log",
     benchmark:
         f"{RESULTS}/benchmarks/round_{{r}}/score.tsv"
     conda:
         "../envs/scenebot.yaml"
-    threads: workflow.cores
+    threads: ALL_CORES
     params:
         py=PY,
         cfg=stage_params("score"),
@@ -92,7 +113,12 @@ rule goals:
         freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
     output:
         goals=f"{RESULTS}/round_{{r}}/goals.json",
-        picture=f"{RESULTS}/round_{{r}}/goals.png",
+        picture=report(
+            f"{RESULTS}/round_{{r}}/goals.png",
+            caption="../report/goals.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
     log:
         f"{RESULTS}/logs/round_{{r}}/goals.log",
     benchmark:
@@ -118,7 +144,12 @@ checkpoint plan:
     output:
         navgrid=f"{RESULTS}/round_{{r}}/navgrid.npz",
         paths=f"{RESULTS}/round_{{r}}/paths.json",
-        picture=f"{RESULTS}/round_{{r}}/navgrid.png",
+        picture=report(
+            f"{RESULTS}/round_{{r}}/navgrid.png",
+            caption="../report/navgrid.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
     log:
         f"{RESULTS}/logs/round_{{r}}/plan.log",
     benchmark:

@@ -9,7 +9,11 @@ rule tour:
         fused=f"{RESULTS}/final/dense/fused.ply",
         freespace=last_round_freespace,
     output:
-        video=f"{RESULTS}/final/tour/tour.mp4",
+        video=report(
+            f"{RESULTS}/final/tour/tour.mp4",
+            caption="../report/tour.rst",
+            category="5. Tour",
+        ),
         index=f"{RESULTS}/final/tour/index.html",
         data=f"{RESULTS}/final/tour/tour_data.js",
         summary=f"{RESULTS}/final/tour/tour_summary.json",
@@ -19,7 +23,7 @@ rule tour:
         f"{RESULTS}/benchmarks/tour.tsv"
     conda:
         "../envs/scenebot.yaml"
-    threads: workflow.cores
+    threads: ALL_CORES
     params:
         py=PY,
         cfg=stage_params("tour"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import shutil
 import subprocess
@@ -103,6 +104,14 @@ def test_round0_capture_through_the_nxt_driver_and_the_brick_emulator(workdir):
 CANNED = ROOT / "tests" / "data" / "canned" / "round_000" / "capture"
 
 
+def report_data(html: str, script: str) -> dict:
+    """The JSON a Snakemake HTML report embeds as `<script id="{script}">var x = {...};`:
+    "results" (by path: name, caption as HTML, mime type, the file as a base64 data URI),
+    "categories", "rulegraph" (a Vega spec)."""
+    text = html.split(f'<script id="{script}">', 1)[1].split("=", 1)[1]
+    return json.JSONDecoder().raw_decode(text.lstrip())[0]
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
 def test_every_stage_runs_on_the_canned_photo_set(workdir):
@@ -119,6 +128,7 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
         adaptive={"fan_photos": 3},
         dense={"max_image_size": 320},
         tour={"width": 160, "height": 120, "eval_holdout": 4, "path": {"frames": 24}},
+        evaluate={"validity_candidates": 24, "validity_width": 160, "validity_height": 120},
     )
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     capture = workdir / "results/office/round_000/capture"
@@ -167,7 +177,40 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
     for r in rounds:
         assert (results / f"round_{r:03d}/evaluation.json").is_file()
     assert (results / "eval/observable_surface.png").is_file()
+    validity = json.loads((results / "final/score_validity.json").read_text())
+    assert 3 <= validity["candidates"] <= 24
+    assert -1.0 <= validity["spearman_score_psnr"] <= 1.0
+    assert len(validity["rows"]) == validity["candidates"]
     assert snakemake(workdir, "-n").stdout.count("Nothing to be done") == 1
+
+    # the HTML report: every stage's pictures, the tables, the tour video, the rule graph
+    html = workdir / "report.html"
+    # exactly the README's command: no --cores (Snakemake needs none to write a report)
+    cmd = [*SNAKEMAKE, "-s", str(ROOT / "Snakefile"), "-d", str(workdir), "--report", str(html)]
+    built = subprocess.run(cmd, capture_output=True, text=True, cwd=workdir, timeout=900)
+    assert built.returncode == 0, built.stderr[-4000:]
+    page = html.read_text(encoding="utf-8")
+    entries = report_data(page, "results")
+    expected = {"campaign.png", "campaign.json", "eval/observable_surface.png"}
+    expected |= {"final/tour/tour.mp4", "final/evaluation.png"}
+    expected.add("final/score_validity.png")
+    for r in rounds:
+        d = f"round_{r:03d}"
+        expected |= {f"{d}/{f}" for f in ("sfm/map.png", "evaluation.png", "candidates.csv")}
+        expected |= {f"{d}/{f}.png" for f in ("freespace", "score_views", "goals", "navgrid")}
+        expected.add(f"{d}/capture/trajectory.png")
+    for name in sorted(expected):
+        entry = entries.get(f"results/office/{name}")
+        assert entry is not None, f"{name} not in the report: {sorted(entries)}"
+        assert entry["caption"].strip(), f"{name} has no caption"
+        data = base64.b64decode(entry["data_uri"].split("base64,", 1)[1])
+        assert data == (results / name).read_bytes(), f"{name} embedded wrong"
+    assert entries["results/office/final/tour/tour.mp4"]["mime_type"] == "video/mp4"
+    assert "round 000" in entries["results/office/round_000/sfm/map.png"]["caption"]
+    graph = report_data(page, "rulegraph")["data"][0]["values"]
+    assert {"capture_round0", "sfm", "plan", "campaign", "dense", "tour"} <= {
+        node["rule"] for node in graph
+    }
 
     # a decision stage changes: maps and decisions are rebuilt, photos are kept
     photos = {p: p.stat().st_mtime_ns for p in results.glob("round_*/capture/images/*.jpg")}
