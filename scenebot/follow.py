@@ -212,42 +212,13 @@ class PathFollower:
             cand = robot_pose_from_camera(est, self.cfg.camera_forward_m, self.cfg.camera_left_m)
             off = self._compass_disagreement_deg(cand, compass_deg)
             if off is not None:
-                if res is not None:
-                    res.failed_localizations += 1
-                self._event(
-                    "localize_rejected",
-                    image=str(path),
-                    reason=str(FailureReason.INCONSISTENT_WITH_COMPASS),
-                    compass_deg=compass_deg,
-                    heading_off_deg=off,
-                    candidate=cand.as_dict(),
-                    localization=est.as_record(),
-                )
-                return LocalizationFailure(
-                    FailureReason.INCONSISTENT_WITH_COMPASS,
-                    est.num_features,
-                    est.num_matches,
-                    est.num_inliers,
-                    est.timings_s,
-                )
+                return self._reject(
+                    path, FailureReason.INCONSISTENT_WITH_COMPASS, cand, est,
+                    compass_deg=compass_deg, heading_off_deg=off,
+                )  # fmt: skip
             if not self._consistent(cand, odo):
                 self._rejected = (cand, odo)
-                if res is not None:
-                    res.failed_localizations += 1
-                self._event(
-                    "localize_rejected",
-                    image=str(path),
-                    reason=str(FailureReason.INCONSISTENT_WITH_ODOMETRY),
-                    candidate=cand.as_dict(),
-                    localization=est.as_record(),
-                )
-                return LocalizationFailure(
-                    FailureReason.INCONSISTENT_WITH_ODOMETRY,
-                    est.num_features,
-                    est.num_matches,
-                    est.num_inliers,
-                    est.timings_s,
-                )
+                return self._reject(path, FailureReason.INCONSISTENT_WITH_ODOMETRY, cand, est)
             self._rejected = None
             self._fix = cand
             self._odo_at_fix = odo
@@ -260,6 +231,17 @@ class PathFollower:
                 res.failed_localizations += 1
             self._event("localize_failed", image=str(path), localization=est.as_record())
         return est
+
+    def _reject(self, path: Path, reason: FailureReason, cand: Pose2D, est: PoseEstimate,
+                **fields) -> LocalizationFailure:  # fmt: skip
+        """Log a fix that is not used (``localize_rejected``) and return it as a failure."""
+        if self._result is not None:
+            self._result.failed_localizations += 1
+        self._event("localize_rejected", image=str(path), reason=str(reason), **fields,
+                    candidate=cand.as_dict(), localization=est.as_record())  # fmt: skip
+        return LocalizationFailure(
+            reason, est.num_features, est.num_matches, est.num_inliers, est.timings_s
+        )
 
     def _compass_disagreement_deg(self, cand: Pose2D, compass_deg: float | None) -> float | None:
         """How far (deg) a fix's heading is from the compass when beyond ``compass_gate_deg``,
