@@ -67,3 +67,29 @@ def test_plan_stage_writes_grid_paths_and_picture(sfm_dir, tmp_path):
 def test_missing_model_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="run the sfm stage"):
         read_map_geometry(tmp_path)
+
+
+def test_a_goal_the_planner_cannot_reach_is_replaced_by_the_next_backup(sfm_dir, tmp_path):
+    _, centres, _ = read_map_geometry(sfm_dir)
+    lo, hi = centres[:, :2].min(0), centres[:, :2].max(0)
+    mid = (lo + hi) / 2
+    far = [float(hi[0] + 50.0), float(hi[1])]  # outside the grid: never plannable
+    goals = {
+        "goals": [{"x": far[0], "y": far[1], "theta": 0.0}, {"x": float(lo[0]), "y": float(lo[1])}],
+        "backups": [
+            {"x": far[0] + 1.0, "y": far[1], "theta": 0.0},  # no better
+            {"x": float(mid[0]), "y": float(mid[1]), "theta": 1.0, "rank": 7},
+        ],
+    }
+    gj = tmp_path / "goals.json"
+    gj.write_text(json.dumps(goals))
+    out = PlanOutputs(tmp_path / "navgrid.npz", tmp_path / "paths.json")
+    doc = run(PlanConfig(obstacle_z_min_m=1e9), PlanInputs(sfm_dir, gj), out, start_xy=tuple(hi))
+    p0, p1 = doc["paths"]
+    assert p0["status"] == "ok" and p0["goal"]["rank"] == 7
+    assert [r["reason"] for r in p0["replaced"]] == ["goal_outside_grid"] * 2
+    assert p1["status"] == "ok" and "replaced" not in p1
+    # without backups the goal stays, skipped, with its reason
+    gj.write_text(json.dumps({"goals": goals["goals"]}))
+    doc = run(PlanConfig(obstacle_z_min_m=1e9), PlanInputs(sfm_dir, gj), out, start_xy=tuple(hi))
+    assert doc["paths"][0]["status"] == "skipped" and "replaced" not in doc["paths"][0]

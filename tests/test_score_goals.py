@@ -152,3 +152,23 @@ def test_zero_candidates_file_is_named(scored_room, tmp_path):
             GoalsInputs(p, scored_room["mo"].freespace_npz),
             GoalsOutputs(tmp_path / "round_007" / "goals.json"),
         )
+
+
+def test_goals_keep_enough_photographed_surface_to_register(scored_room, tmp_path):
+    """goals.min_seen_fraction: a goal view shows at least that share of already photographed
+    surface (else its photo could not be registered); 0 is the paper's choice."""
+    cols = read_candidates(scored_room["so"].candidates_csv)
+    seen = {}
+    for m in (0.0, 0.4):
+        go = GoalsOutputs(tmp_path / f"goals_{m}.json")
+        doc = run_goals(
+            GoalsConfig(k=6, min_seen_fraction=m),
+            GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz),
+            go,
+        )
+        idx = [g["candidate"] for g in doc["goals"]]
+        assert idx
+        seen[m] = cols["seen_fraction"][idx]
+        assert doc["best_score_any_deg"] >= doc["best_score_deg"]
+    assert np.all(seen[0.4] >= 0.4)
+    assert seen[0.0].min() < 0.4  # the paper's goals include views that show almost nothing known

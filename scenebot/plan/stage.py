@@ -85,11 +85,14 @@ def read_map_geometry(sfm_dir: Path, with_headings: bool = False):
     return pts, centres, names, headings
 
 
-def read_goals(goals_json: Path) -> list[dict]:
-    """Goals as dicts with at least ``x`` and ``y`` (m), see the module docstring."""
+def read_goals(goals_json: Path, key: str = "goals") -> list[dict]:
+    """Goals (or with ``key="backups"`` the backups) as dicts with at least ``x`` and ``y``
+    (m), see the module docstring."""
     goals_json = Path(goals_json)
     data = json.loads(goals_json.read_text(encoding="utf-8"))
-    items = data.get("goals", []) if isinstance(data, dict) else data
+    if not isinstance(data, dict) and key != "goals":
+        return []
+    items = data.get(key, []) if isinstance(data, dict) else data
     goals = []
     for i, g in enumerate(items):
         if isinstance(g, dict) and "x" in g and "y" in g:
@@ -151,37 +154,54 @@ def plan_all(
     goals: list[dict],
     cfg: PlanConfig,
     camera_offset_m: tuple[float, float] = (0.0, 0.0),
+    backups: list[dict] | None = None,
 ) -> list[dict]:
     """Chained paths start -> goal 0 -> goal 1 ...; skipped goals carry their reason.
+
+    A goal that cannot be planned to is replaced by the next unused backup (goals.json's
+    ``backups``, next in rank) that can; the record then lists the goals it replaced
+    (``replaced``, with their reasons). Without a working backup the goal stays, skipped.
 
     Goals are camera poses (goals.json's convention: camera centre x, y and heading theta);
     the path leads the robot's rotation axis to where the camera centre lands on the goal
     (``robot_goal`` in the records). A goal without ``theta`` is taken as a robot position.
     """
     here = np.asarray(start_xy, float)
+    spare = list(backups or [])
     out = []
     for i, goal in enumerate(goals):
-        gxy = np.array([float(goal["x"]), float(goal["y"])])
-        if goal.get("theta") is not None:
-            gxy = robot_xy_for_camera(gxy, float(goal["theta"]), camera_offset_m)
-        snapped = snap_to_free(grid, gxy, cfg.goal_snap_m)
-        extra = {}
-        if snapped is not None and not np.allclose(snapped, gxy):
-            extra = {"snapped_from": gxy.tolist(), "snap_m": float(np.hypot(*(snapped - gxy)))}
-            gxy = snapped
-        res = plan_path(grid, here, gxy, cfg.simplify_factor)
+        gxy, res, extra = _plan_one(grid, here, goal, cfg, camera_offset_m)
+        replaced = []
+        while isinstance(res, PlanFailure) and spare:
+            replaced.append({"goal": goal, "reason": str(res.reason), "message": res.message})
+            goal = spare.pop(0)
+            gxy, res, extra = _plan_one(grid, here, goal, cfg, camera_offset_m)
         rec = {
             "goal_index": i,
             "goal": goal,
             "robot_goal": gxy.tolist(),
             "from": here.tolist(),
             **extra,
+            **({"replaced": replaced} if replaced else {}),
             **res.as_dict(),
         }
         out.append(rec)
         if not isinstance(res, PlanFailure):
             here = gxy
     return out
+
+
+def _plan_one(grid: NavGrid, here: np.ndarray, goal: dict, cfg: PlanConfig, camera_offset_m):
+    """(robot goal position, plan or failure, snapping record) of one goal."""
+    gxy = np.array([float(goal["x"]), float(goal["y"])])
+    if goal.get("theta") is not None:
+        gxy = robot_xy_for_camera(gxy, float(goal["theta"]), camera_offset_m)
+    snapped = snap_to_free(grid, gxy, cfg.goal_snap_m)
+    extra = {}
+    if snapped is not None and not np.allclose(snapped, gxy):
+        extra = {"snapped_from": gxy.tolist(), "snap_m": float(np.hypot(*(snapped - gxy)))}
+        gxy = snapped
+    return gxy, plan_path(grid, here, gxy, cfg.simplify_factor), extra
 
 
 def run(
@@ -209,12 +229,13 @@ def run(
     if len(centres) == 0:
         raise ValueError(f"{inputs.sfm_dir}: the model has no registered images")
     goals = read_goals(inputs.goals_json)
+    backups = read_goals(inputs.goals_json, "backups")
     # the explored area: where the robot has been and where it is asked to go (goals lie in
     # the map's free space, which reaches beyond the camera positions); a goal outside the
     # map's points is no part of it and is skipped as outside the grid
     extent = centres[:, :2]
     if goals and len(points):
-        gxy = np.array([[g["x"], g["y"]] for g in goals], float)
+        gxy = np.array([[g["x"], g["y"]] for g in goals + backups], float)
         lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
         inside = np.all((gxy >= lo) & (gxy <= hi), axis=1)
         extent = np.vstack([extent, gxy[inside]])
@@ -224,7 +245,7 @@ def run(
         start = np.asarray(start_xy, float)
     else:
         start = robot_xy_for_camera(centres[-1, :2], headings[-1], camera_offset_m)
-    paths = plan_all(grid, start, goals, cfg, camera_offset_m)
+    paths = plan_all(grid, start, goals, cfg, camera_offset_m, backups)
     g = grid.geometry
     doc = {
         "grid": {"origin_xy": list(g.origin_xy), "cell_m": g.cell_m, "shape": list(g.shape)},

@@ -99,6 +99,13 @@ class GoalsConfig(BaseModel):
         "frontier: the baseline, nearest boundary between seen and unseen free space first.",
     )
     k: int = Field(5, ge=1, description="Most goals chosen per round (count).")
+    backups: int = Field(
+        5,
+        ge=0,
+        description="Next-ranked candidates listed as backups: the plan stage takes one in "
+        "place of a goal it cannot route to (inside an obstacle of its grid, outside it, or "
+        "walled off).",
+    )
     frontier_range_m: float = Field(
         3.0, gt=0, description="frontier: a photo sees free space up to this distance (m)."
     )
@@ -118,6 +125,14 @@ class GoalsConfig(BaseModel):
         10.0,
         ge=0.0,
         description="Exploration is complete when the best (highest) view score is below this.",
+    )
+    min_seen_fraction: float = Field(
+        0.4,
+        ge=0.0,
+        le=1.0,
+        description="Candidates whose view shows less of the map's already photographed "
+        "surface than this share of its pixels are not goals: a photo there could not be "
+        "registered to the map (too little overlap). 0: the paper's choice, overlap ignored.",
     )
     min_hit_fraction: float = Field(
         0.2,

@@ -206,10 +206,22 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
         )
     fs = FreeSpace.load(inputs.freespace_npz)
     valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & fs.contains(poses[:, :2])
+    any_valid = valid.copy()
+    registrable = cols["seen_fraction"] >= cfg.min_seen_fraction
+    if cfg.method == "score" and (valid & registrable).any():
+        valid &= registrable
+    elif cfg.method == "score" and valid.any():
+        log.warning(
+            "%s: no candidate shows goals.min_seen_fraction = %.2f of photographed surface; "
+            "goals ignore the overlap this round", where, cfg.min_seen_fraction,
+        )  # fmt: skip
     score = np.where(valid, cols["score_deg"], np.nan)
     if cfg.method == "frontier":
         return _frontier_goals(cfg, inputs, outputs, fs, score, where)
-    chosen = select_goals(poses, score, cfg.k, cfg.nms_radius_m, cfg.nms_angle_deg, valid)
+    ranked = select_goals(
+        poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
+    )
+    chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
         score,
@@ -218,10 +230,17 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
         where,
         extra={
             "n_valid": int(valid.sum()),
+            "min_seen_fraction": cfg.min_seen_fraction,
+            # the best score over every candidate, registrable or not (for information:
+            # "complete" and the goals only consider views a photo could be registered from)
+            "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
             "nms_radius_m": cfg.nms_radius_m,
             "nms_angle_deg": cfg.nms_angle_deg,
         },
     )
+    # next in rank, for the planner to use in place of a goal it cannot route to
+    spare = goals_document(poses, score, backups, 0.0, where)["goals"]
+    doc["backups"] = [{**g, "rank": g["rank"] + len(chosen)} for g in spare]
     write_goals(outputs.goals_json, doc)
     if outputs.goals_png is not None:
         from scenebot.score.plots import plot_goals
@@ -229,6 +248,11 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
         title = f"{where}: goals (complete={doc['complete']})"
         plot_goals(outputs.goals_png, fs, poses, score, chosen, title)
     return doc
+
+
+def _best(score: np.ndarray) -> float | None:
+    finite = np.isfinite(score)
+    return round(float(np.max(score[finite])), 4) if finite.any() else None
 
 
 def _goal_record(rank: int, g: dict) -> dict:
