@@ -270,6 +270,7 @@ def test_too_few_registered_names_the_photos(tmp_path):
         )
     msg = str(exc.value)
     assert "x0.jpg" in msg and "x2.jpg" in msg
+    assert "3 run(s)" in msg  # retried with other seeds before giving up
 
 
 def test_inputs_for_round_layout(tmp_path):

@@ -101,6 +101,17 @@ class SfmConfig(BaseModel):
         description="Fail with a clear message when fewer than this share of photos registers.",
     )
     random_seed: int = Field(0, description="Seed for pycolmap's RANSAC and pair sampling.")
+    mapping_attempts: int = Field(
+        3,
+        ge=1,
+        description=(
+            "Mapping from scratch runs again with another seed (random_seed + 1, + 2, ...) "
+            "while fewer than min_registered_share of the photos register, up to this many "
+            "runs; the largest model wins. Incremental mapping picks its initial pair and "
+            "RANSAC samples at random, and on weakly overlapping sets a run can split the "
+            "model where the next one does not."
+        ),
+    )
     global_ba_ratio: float = Field(
         1.1,
         ge=1.01,

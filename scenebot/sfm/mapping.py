@@ -32,6 +32,8 @@ class MappingResult:
         dropped: photo name -> reason, for photos not in the kept model.
         seconds: wall time of mapping.
         refinement: stats of the final robust refinement (empty when off).
+        attempts: mapping runs from scratch (``cfg.mapping_attempts`` at most; 0 when
+            continuing from the previous model sufficed).
     """
 
     reconstruction: pycolmap.Reconstruction
@@ -40,6 +42,7 @@ class MappingResult:
     dropped: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
     refinement: dict = field(default_factory=dict)
+    attempts: int = 0
 
 
 def filter_observations(rec: pycolmap.Reconstruction, max_error_px: float) -> int:
@@ -201,6 +204,50 @@ def _run(
     )
 
 
+def _largest(models: dict[int, pycolmap.Reconstruction]) -> int:
+    return max((r.num_reg_images() for r in models.values()), default=0)
+
+
+def _scratch(
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    cfg: SfmConfig,
+    names: list[str],
+    fix_focal: bool,
+) -> tuple[dict[int, pycolmap.Reconstruction], int]:
+    """Map from scratch; run again with the next seed (``cfg.mapping_attempts`` runs at
+    most) while the largest model holds fewer than ``cfg.min_registered_share`` of the
+    photos, and keep the run whose largest model is largest.
+
+    Returns:
+        The kept run's models and the number of runs.
+    """
+    best: dict[int, pycolmap.Reconstruction] = {}
+    for attempt in range(cfg.mapping_attempts):
+        run_cfg = cfg.model_copy(update={"random_seed": cfg.random_seed + attempt})
+        models = _run(
+            db_path, image_root, work / f"attempt_{attempt}", run_cfg, names, None, fix_focal
+        )
+        if _largest(models) > _largest(best):
+            best = models
+        n = _largest(best)
+        if n >= cfg.min_registered_share * len(names):
+            break
+        if attempt + 1 < cfg.mapping_attempts:
+            log.warning(
+                "mapping run %d (seed %d) registered %d of %d photos in its largest model: "
+                "running again with seed %d (sfm.mapping_attempts = %d)",
+                attempt + 1,
+                run_cfg.random_seed,
+                _largest(models),
+                len(names),
+                run_cfg.random_seed + 1,
+                cfg.mapping_attempts,
+            )
+    return best, attempt + 1
+
+
 def _reasons(db_path: Path, names: list[str], kept: set[str], others: set[str], cfg) -> dict:
     """Why each photo outside the kept model dropped."""
     dropped: dict[str, str] = {}
@@ -284,12 +331,14 @@ def map_photos(
             )
             mode = "incremental->scratch"
             models = {}
+    attempts = 0
     if not models:
-        models = _run(db_path, image_root, work, cfg, names, None, fix_focal)
+        models, attempts = _scratch(db_path, image_root, work, cfg, names, fix_focal)
     if not models:
         dropped = _reasons(db_path, names, set(), set(), cfg)
         raise SfmError(
-            "mapping found no model: no initial pair of photos with enough verified matches. "
+            f"mapping found no model in {attempts} run(s) (sfm.mapping_attempts): no initial "
+            "pair of photos with enough verified matches. "
             "Photos need overlap and texture; first photos without matches: "
             + ", ".join(list(dropped)[:10])
         )
@@ -343,4 +392,5 @@ def map_photos(
         )
         refinement["seconds"] = time.perf_counter() - t1
         refinement["fixed_previous_photos"] = len(kept_previous)
-    return MappingResult(best, mode, len(ranked), dropped, time.perf_counter() - t0, refinement)
+    seconds = time.perf_counter() - t0
+    return MappingResult(best, mode, len(ranked), dropped, seconds, refinement, attempts)

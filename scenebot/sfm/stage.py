@@ -285,7 +285,8 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
         raise SfmError(
             f"only {n_reg} of {len(photos)} photos registered (sfm.min_registered_share = "
-            f"{cfg.min_registered_share}). Dropped photos:\n  {listing}\n"
+            f"{cfg.min_registered_share}; best of {max(mres.attempts, 1)} run(s), "
+            f"sfm.mapping_attempts). Dropped photos:\n  {listing}\n"
             "Photos need overlap (neighbouring views sharing >= 1/3 of the scene) and "
             "texture; add photos between the dropped ones or lower sfm.min_registered_share."
         )
@@ -397,6 +398,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         "points3D": rec.num_points3D(),
         "mean_reprojection_error_px": rec.compute_mean_reprojection_error(),
         "mapping_mode": mres.mode,
+        "mapping_attempts": mres.attempts,
         "refinement": mres.refinement,
         "circle_priors": circle_stats,
         "models": mres.num_models,
