@@ -16,7 +16,7 @@ from scenebot.sfm.align import (
     fit_scale_to_circles,
     turn_in_place_circles,
 )
-from scenebot.sfm.evaluate import evaluate_accuracy, umeyama
+from scenebot.sfm.evaluate import evaluate_accuracy, robust_similarity, umeyama
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.photos import Photo
 
@@ -190,6 +190,30 @@ def test_umeyama_recovers_similarity(seed, scale):
     assert s == pytest.approx(scale, rel=1e-6)
     assert np.allclose(R_est, R, atol=1e-6)
     assert np.allclose(t_est, t, atol=1e-6 * max(1.0, scale) * 10)
+
+
+def test_robust_similarity_is_not_turned_by_a_few_photos_decimetres_off():
+    """Photos around a room (mm noise) plus one goal's fan of 4 photos registered 18-38 cm
+    off together (as in the default campaign): plain Umeyama turns the frame and shifts the
+    scale, the robust fit keeps both and flags exactly those four."""
+    rng = np.random.default_rng(3)
+    src = np.c_[rng.uniform(-2.5, 2.5, 100), rng.uniform(-2.0, 2.0, 100), np.zeros(100)]
+    fan = np.array([3.0, 2.2, 0.0]) + rng.normal(0, 0.05, (4, 3)) * [1, 1, 0]
+    src = np.vstack([src, fan])
+    R = _random_rotation(rng)
+    dst = 1.3 * src @ R.T + np.array([1.0, 2.0, 0.3]) + rng.normal(0, 0.002, src.shape)
+    bad = [100, 101, 102, 103]
+    dst[bad] += np.outer([0.38, 0.30, 0.23, 0.18], R @ np.array([0.6, -0.8, 0.0]))
+
+    def angle(Ra):
+        return np.degrees(np.arccos(np.clip((np.trace(Ra @ R.T) - 1) / 2, -1, 1)))
+
+    s_plain, R_plain, _ = umeyama(src, dst)
+    s, R_rob, _, inl, d = robust_similarity(src, dst)
+    assert angle(R_plain) > 0.2 or abs(s_plain / 1.3 - 1) > 0.005
+    assert angle(R_rob) < 0.05 and s == pytest.approx(1.3, rel=1e-3)
+    assert sorted(np.flatnonzero(~inl)) == bad
+    assert d[bad].min() > 0.1 and np.median(d) < 0.01
 
 
 def test_evaluate_accuracy_on_synthetic_model():

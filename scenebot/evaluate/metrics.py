@@ -37,8 +37,9 @@ class Similarity:
         scale: world metres per map unit.
         R: (3, 3) rotation.
         t: (3,) translation (m).
-        photos: photos used in the fit.
-        residual_m: statistics of the fitted centres' distances to the true ones (m).
+        photos: photos the fit follows (:func:`scenebot.sfm.evaluate.robust_similarity`:
+            those a decimetre off do not turn the frame).
+        residual_m: statistics of every registered centre's distance to the true one (m).
     """
 
     scale: float
@@ -80,7 +81,8 @@ def true_centers(captures: Sequence[Path]) -> dict[str, np.ndarray]:
 
 
 def robot_to_world(sfm_dir: Path, captures: Sequence[Path]) -> Similarity:
-    """Fit the robot-frame -> world similarity to the registered photos' true centres.
+    """Fit the robot-frame -> world similarity to the registered photos' true centres,
+    robustly (:func:`scenebot.sfm.evaluate.robust_similarity`).
 
     Args:
         sfm_dir: a COLMAP model folder in the robot frame (``round_{r}/sfm``).
@@ -91,7 +93,7 @@ def robot_to_world(sfm_dir: Path, captures: Sequence[Path]) -> Similarity:
     """
     import pycolmap
 
-    from scenebot.sfm.evaluate import umeyama
+    from scenebot.sfm.evaluate import robust_similarity
 
     sfm_dir = Path(sfm_dir)
     if not (sfm_dir / "images.bin").is_file():
@@ -111,9 +113,8 @@ def robot_to_world(sfm_dir: Path, captures: Sequence[Path]) -> Similarity:
             "logs (need 3): evaluation needs a simulated capture"
         )
     est, tru = np.array(est), np.array(tru)
-    s, R, t = umeyama(est, tru)
-    res = np.linalg.norm(s * est @ R.T + t - tru, axis=1)
-    return Similarity(float(s), R, t, len(est), summary_stats(res))
+    s, R, t, inl, res = robust_similarity(est, tru)
+    return Similarity(float(s), R, t, int(inl.sum()), summary_stats(res))
 
 
 def weighted_cloud_metrics(

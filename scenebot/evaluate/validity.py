@@ -106,7 +106,7 @@ def model_similarity(src_dir: Path, dst_dir: Path) -> tuple[float, np.ndarray, n
     """
     import pycolmap
 
-    from scenebot.sfm.evaluate import umeyama
+    from scenebot.sfm.evaluate import robust_similarity
 
     def centres(d: Path) -> dict[str, np.ndarray]:
         if not (Path(d) / "images.bin").is_file():
@@ -124,7 +124,9 @@ def model_similarity(src_dir: Path, dst_dir: Path) -> tuple[float, np.ndarray, n
             f"{src_dir} and {dst_dir} share {len(common)} registered photos (need 3): the dense "
             "cloud cannot be brought into the round's frame"
         )
-    s, R, t = umeyama(np.array([a[n] for n in common]), np.array([b[n] for n in common]))
+    s, R, t, _, _ = robust_similarity(
+        np.array([a[n] for n in common]), np.array([b[n] for n in common])
+    )
     return float(s), R, t, len(common)
 
 
