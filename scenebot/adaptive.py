@@ -10,7 +10,8 @@ bumper finds). Writes ``round_{r}/capture/`` like round 0:
 * ``session.jsonl`` / ``log.jsonl``: photo records carry ``odometry``, ``localization``
   (the robot pose estimated from that very photo, map frame), ``localization_inliers`` and
   ``goal_index``; events ``follow_start``, ``localize``, ``obstacle``, ``replan``,
-  ``follow_end``, ``goal_reached`` / ``goal_abandoned`` / ``goal_skipped`` (with the reason);
+  ``follow_end``, ``goal_reached`` / ``goal_abandoned`` / ``goal_skipped`` (with the reason;
+  a backup goal driven to in place of an abandoned one carries ``backup_for``);
   in the simulator every record carries ``truth`` (evaluation only);
 * ``trajectory.png``: the map-frame picture of the round (grid, planned and driven paths,
   fixes, photos, obstacles, goals reached and abandoned);
@@ -34,6 +35,7 @@ import os
 import re
 import stat
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -169,6 +171,79 @@ def _go(follower, path: dict, theta: float, index: int):
     return follower.go_to(np.asarray(path["robot_goal"], float), theta, index)
 
 
+def unused_backups(goals_doc: dict, paths: list[dict]) -> list[dict]:
+    """goals.json's backups the plan stage did not already put in place of a goal, by rank."""
+    used = {p.get("goal", {}).get("candidate") for p in paths}
+    return [b for b in goals_doc.get("backups", []) if b.get("candidate") not in used]
+
+
+def visit_goals(
+    paths: list[dict],
+    spare: list[dict],
+    go: Callable[[dict, dict | None, int], object],
+    shoot: Callable[[dict, int, int], int],
+    event: Callable[..., None],
+    per_goal: int,
+    budget: int,
+) -> tuple[list[dict], int]:
+    """Visit the planned goals in order and photograph each one reached.
+
+    A goal given up on the way (``follow.max_obstacles`` bumps, no route left) is replaced by
+    the next backup of ``spare`` (consumed), driven to from where the robot stands, until one
+    is reached or none is left: the round still takes its photos when the map put a goal
+    where the robot cannot go. Every attempt gets a ``goal_reached`` / ``goal_abandoned`` /
+    ``goal_skipped`` event; a backup's carries ``backup_for`` (the goal index it replaces).
+
+    Args:
+        paths: ``paths.json``'s paths (goal, status, waypoints, robot_goal).
+        spare: backup goals, best first.
+        go: ``go(goal, path or None, k)`` drives there (None: plan from here) and returns a
+            :class:`scenebot.follow.FollowResult`.
+        shoot: ``shoot(goal, k, first_photo_index)`` takes the goal's photos, returns how many.
+        event: ``event(name, k, goal, **fields)`` logs a goal event.
+        per_goal: photos a goal takes; ``budget``: photos of the round at most.
+
+    Returns:
+        One outcome per attempt (goal_index, status, reason, and backup_for) and the number of
+        photos taken.
+    """
+    outcomes: list[dict] = []
+    n_photos = 0
+    for k, path in enumerate(paths):
+        goal = path.get("goal", {})
+        if n_photos + per_goal > budget:
+            reason = f"photo budget of the round reached (adaptive.max_photos = {budget})"
+        elif path.get("status") != "ok":
+            reason = f"not planned: {path.get('message') or path.get('status')}"
+        else:
+            reason = None
+        if reason is not None:
+            event("goal_skipped", k, goal, reason=reason, robot_goal=path.get("robot_goal"))
+            outcomes.append({"goal_index": k, "status": "skipped", "reason": reason})
+            continue
+        res = go(goal, path, k)
+        extra: dict = {}
+        while not res.reached:
+            event("goal_abandoned", k, goal, reason=res.reason, obstacles=res.obstacles,
+                  robot_goal=path.get("robot_goal") if not extra else None,
+                  **extra)  # fmt: skip
+            outcomes.append({"goal_index": k, "status": "abandoned", "reason": res.reason,
+                             **extra})  # fmt: skip
+            if not spare:
+                break
+            goal, extra = spare.pop(0), {"backup_for": k}
+            log.info("goal %d abandoned: trying backup goal of rank %s", k, goal.get("rank"))
+            res = go(goal, None, k)
+        if not res.reached:
+            continue
+        event("goal_reached", k, goal, reason="reached", estimate=res.pose.as_dict(),
+              distance_m=res.distance_m, localized_at_goal=res.localized_at_goal,
+              robot_goal=path["robot_goal"] if not extra else None, **extra)  # fmt: skip
+        outcomes.append({"goal_index": k, "status": "reached", "reason": "reached", **extra})
+        n_photos += shoot(goal, k, n_photos)
+    return outcomes, n_photos
+
+
 def _photo_at(follower, robot, camera, capture_dir: Path, name: str, localize: bool) -> dict:
     """Take a goal photo; localize it (a fix for the follower when consistent).
 
@@ -218,6 +293,7 @@ def run_adaptive(
     from scenebot.localize import make_localizer
     from scenebot.plan.navgrid import NavGrid
     from scenebot.plan.path import GridPlanner
+    from scenebot.plan.stage import robot_xy_for_camera
 
     if round_index < 1:
         raise ValueError("adaptive capture is for rounds >= 1 (round 0 explores)")
@@ -289,48 +365,40 @@ def run_adaptive(
         )  # fmt: skip
         try:
             follower.localize_now()  # where the robot really is, before the first path
-            for k, path in enumerate(paths):
-                goal = path.get("goal", {})
-                if n_photos + per_goal > budget:
-                    reason = f"photo budget of the round reached (adaptive.max_photos = {budget})"
-                elif path.get("status") != "ok":
-                    reason = f"not planned: {path.get('message') or path.get('status')}"
-                else:
-                    reason = None
-                if reason is not None:
-                    _goal_event(clog, robot, "goal_skipped", k, goal, reason=reason,
-                                robot_goal=path.get("robot_goal"))  # fmt: skip
-                    outcomes.append({"goal_index": k, "status": "skipped", "reason": reason})
-                    continue
-                theta = float(goal["theta"])
-                res = _go(follower, path, theta, k)
-                if not res.reached:
-                    _goal_event(clog, robot, "goal_abandoned", k, goal, reason=res.reason,
-                                robot_goal=path.get("robot_goal"),
-                                obstacles=res.obstacles)  # fmt: skip
-                    outcomes.append({"goal_index": k, "status": "abandoned", "reason": res.reason})
-                    continue
-                _goal_event(clog, robot, "goal_reached", k, goal, reason="reached",
-                            robot_goal=path["robot_goal"],
-                            estimate=follower.pose.as_dict(), distance_m=res.distance_m,
-                            localized_at_goal=res.localized_at_goal)  # fmt: skip
-                outcomes.append({"goal_index": k, "status": "reached", "reason": "reached"})
-                for h in goal_headings(theta, acfg):
+
+            def go(goal: dict, path: dict | None, k: int):
+                if path is not None:
+                    return _go(follower, path, float(goal["theta"]), k)
+                xy = np.array([goal["x"], goal["y"]], float)
+                return follower.go_to_view(xy, float(goal["theta"]), k)
+
+            def shoot(goal: dict, k: int, first: int) -> int:
+                for j, h in enumerate(goal_headings(float(goal["theta"]), acfg)):
                     turn = wrap_angle(h - follower.pose.theta)
                     if abs(math.degrees(turn)) > fcfg.min_turn_deg:
                         robot.turn(turn)
-                    name = f"images/r{round_index:03d}_{n_photos:04d}.jpg"
+                    name = f"images/r{round_index:03d}_{first + j:04d}.jpg"
                     rec = _photo_at(follower, robot, camera, capture_dir, name,
                                     acfg.localize_photos)  # fmt: skip
-                    record = {"type": "photo", "index": n_photos, **rec, "goal_index": k,
+                    record = {"type": "photo", "index": first + j, **rec, "goal_index": k,
                               "requested_heading": h % (2 * math.pi)}  # fmt: skip
                     if truth is not None:
                         record["truth"] = truth()
                     clog.write(record)
                     if rec.get("localization_ok"):
                         inliers.append(rec["localization_inliers"])
-                    n_photos += 1
                     bar.update(1)
+                return j + 1
+
+            def event(name: str, k: int, goal: dict, **fields):
+                if fields.get("robot_goal") is None and "theta" in goal:  # a backup goal
+                    xy = np.array([goal["x"], goal["y"]], float)
+                    mount = cfg.camera_mount()
+                    fields["robot_goal"] = robot_xy_for_camera(xy, goal["theta"], mount).tolist()
+                _goal_event(clog, robot, name, k, goal, **fields)
+
+            spare = unused_backups(goals_doc, paths) if acfg.replace_abandoned else []
+            outcomes, n_photos = visit_goals(paths, spare, go, shoot, event, per_goal, budget)
         except BaseException as exc:
             clog.write({"type": "event", "t": robot.now, "event": "error", "error": repr(exc)})
             raise
@@ -343,6 +411,7 @@ def run_adaptive(
             "round": round_index,
             "photos": n_photos,
             "goals": len(paths),
+            "backups_tried": sum("backup_for" in o for o in outcomes),
             "reached": sum(o["status"] == "reached" for o in outcomes),
             "abandoned": sum(o["status"] == "abandoned" for o in outcomes),
             "skipped": sum(o["status"] == "skipped" for o in outcomes),

@@ -21,9 +21,10 @@ Record types (field ``type``):
 ``event``
     ``t``, ``event`` (``bump``, ``stall``, ``drive``, ``turn``, ``circle_done``, ``backup``,
     ``error``, ...; adaptive rounds: ``follow_start``, ``localize``, ``localize_failed``,
-    ``localize_rejected``, ``obstacle``, ``replan``, ``follow_end`` with an ``estimate`` of the
-    map-frame pose, and per goal one of ``goal_reached``, ``goal_abandoned``,
-    ``goal_skipped`` with ``goal_index``, ``goal`` and ``reason``), ``odometry``, plus
+    ``localize_rejected``, ``obstacle``, ``replan``, ``no_route``, ``follow_end`` with an
+    ``estimate`` of the map-frame pose, and per goal attempt one of ``goal_reached``,
+    ``goal_abandoned``, ``goal_skipped`` with ``goal_index``, ``goal``, ``reason`` and, for a
+    backup goal tried in place of an abandoned one, ``backup_for``), ``odometry``, plus
     event-specific fields; simulator events carry ``truth`` with the robot pose.
 ``end`` (last line of a complete capture)
     ``t``, ``photos``, ``reason``.

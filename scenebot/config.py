@@ -276,6 +276,12 @@ class AdaptiveConfig(_Model):
         description="Localize every goal photo against the map and log the estimate (it "
         "guides the next map's pair selection).",
     )
+    replace_abandoned: bool = Field(
+        True,
+        description="When the robot gives up on a goal on the way (follow.max_obstacles, no "
+        "route left), it drives to the next unused backup goal of goals.json instead "
+        "(goals.backups), so the round still takes its photos.",
+    )
 
 
 class PhotosConfig(_Model):

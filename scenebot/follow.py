@@ -425,7 +425,7 @@ class PathFollower:
         plan = self.planner(np.array([p.x, p.y]), np.asarray(goal_xy, float))
         if isinstance(plan, PlanFailure):
             res = FollowResult(False, f"skipped: {plan.message}", p, math.inf)
-            self._event("goal_skipped", reason=str(plan.reason), message=plan.message)
+            self._event("no_route", reason=str(plan.reason), message=plan.message)
             return res
         return self.follow(plan.waypoints_xy, goal_theta, goal_index)
 

@@ -211,3 +211,59 @@ def test_replanning_moves_a_goal_off_a_freshly_marked_obstacle():
     assert not isinstance(path, PlanFailure)
     end = path.waypoints_xy[-1]
     assert 0.1 < np.hypot(*(end - goal)) <= 0.3
+
+
+def test_an_abandoned_goal_is_replaced_by_the_next_unused_backup():
+    """Goal 0 is reached; goal 1 is given up on the way, and so is its first backup; the
+    second backup is reached and photographed; the backup the plan stage already used is
+    never tried again; goal 2 is skipped by the plan and costs no backup."""
+    from types import SimpleNamespace
+
+    from scenebot.adaptive import unused_backups, visit_goals
+    from scenebot.robot.base import Pose2D
+
+    def goal(c):
+        return {"candidate": c, "rank": c, "x": float(c), "y": 0.0, "theta": 0.0}
+
+    paths = [
+        {"goal": goal(0), "status": "ok", "robot_goal": [0.0, 0.0], "waypoints": []},
+        {"goal": goal(1), "status": "ok", "robot_goal": [1.0, 0.0], "waypoints": []},
+        {"goal": goal(5), "status": "ok", "robot_goal": [5.0, 0.0], "waypoints": []},  # a backup
+        {"goal": goal(2), "status": "no_route", "message": "walled off"},
+    ]
+    doc = {"goals": [goal(0), goal(1), goal(2), goal(3)], "backups": [goal(5), goal(6), goal(7)]}
+    spare = unused_backups(doc, paths)
+    assert [b["candidate"] for b in spare] == [6, 7]
+    unreachable = {1, 6}
+    driven, events = [], []
+
+    def go(g, path, k):
+        driven.append((g["candidate"], path is not None))
+        ok = g["candidate"] not in unreachable
+        return SimpleNamespace(reached=ok, reason="reached" if ok else "5 obstacles met",
+                               obstacles=0 if ok else 5, pose=Pose2D(g["x"], 0.0, 0.0),
+                               distance_m=0.01, localized_at_goal=True)  # fmt: skip
+
+    def event(name, k, g, **fields):
+        events.append((name, k, g["candidate"], fields.get("backup_for")))
+
+    outcomes, n = visit_goals(paths, spare, go, lambda g, k, first: 3, event, 3, 60)
+    assert driven == [(0, True), (1, True), (6, False), (7, False), (5, True)]
+    assert events == [
+        ("goal_reached", 0, 0, None),
+        ("goal_abandoned", 1, 1, None),
+        ("goal_abandoned", 1, 6, 1),
+        ("goal_reached", 1, 7, 1),
+        ("goal_reached", 2, 5, None),
+        ("goal_skipped", 3, 2, None),
+    ]
+    assert n == 9 and spare == []
+    assert [o["status"] for o in outcomes if "backup_for" not in o] == [
+        "reached", "abandoned", "reached", "skipped",
+    ]  # fmt: skip
+    # without backups the abandoned goal stays abandoned and the budget stops the round
+    events.clear()
+    outcomes, n = visit_goals(paths, [], go, lambda g, k, first: 3, event, 3, 6)
+    assert [e[0] for e in events] == ["goal_reached", "goal_abandoned", "goal_reached",
+                                      "goal_skipped"]  # fmt: skip
+    assert n == 6
