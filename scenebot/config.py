@@ -205,14 +205,17 @@ class FollowConfig(_Model):
         0.25, ge=0, description="Distance (m) ahead of the robot's axis where a bump is marked."
     )
     max_localize_retries: int = Field(
-        4, ge=0, description="Failed localizations at the goal before accepting odometry."
+        8,
+        ge=0,
+        description="Failed localizations at the goal before accepting odometry (with "
+        "retry_turn_deg 40, eight retries look all around).",
     )
     retry_turn_deg: float = Field(
         40.0,
         ge=0,
-        description="Before retrying a failed localization at the goal, turn in place to "
-        "headings +a, -a, +2a, -2a ... (deg) around the arrival heading (a different view); "
-        "0: back up retry_move_m instead.",
+        description="Before retrying a failed localization at the goal, turn in place by "
+        "this angle (deg), sweeping around (small turns slip little); 0: back up "
+        "retry_move_m instead.",
     )
     retry_move_m: float = Field(
         0.08, gt=0, description="Back-up distance (m) before a retry when retry_turn_deg is 0."
@@ -251,6 +254,24 @@ class FollowConfig(_Model):
     )
     turn_to_goal_heading: bool = Field(
         True, description="At the goal, turn to the goal's heading when it has one."
+    )
+    compass_std_deg: float = Field(
+        2.0,
+        ge=0,
+        description="Between visual fixes the heading is dead-reckoned from odometry and "
+        "corrected by the compass after every motion (a 1-D Kalman filter; the map's x axis "
+        "is compass heading 0): this is the compass reading's standard deviation (deg). A "
+        "reading beyond 3 sigma of the prediction is ignored. 0: odometry alone (a map "
+        "whose heading is not from the compass, sfm.use_compass false).",
+    )
+    turn_slip_std: float = Field(
+        0.1,
+        ge=0,
+        description="Standard deviation of a turn's odometry angle, relative to the turn "
+        "(wheels slip on turns in place; the simulator's slip is 8 +- 3 %).",
+    )
+    heading_drift_deg_per_m: float = Field(
+        1.0, ge=0, description="Standard deviation of heading drift per metre driven (deg)."
     )
 
 
@@ -349,6 +370,8 @@ class Config(_Model):
             update["camera_forward_m"] = cam.forward_offset_m
         if "camera_left_m" not in fol.model_fields_set:
             update["camera_left_m"] = cam.lateral_offset_m
+        if not self.sfm.use_compass and "compass_std_deg" not in fol.model_fields_set:
+            update["compass_std_deg"] = 0.0  # the map's x axis is not compass heading 0
         if update and any(getattr(fol, k) != v for k, v in update.items()):
             object.__setattr__(self, "follow", FollowConfig(**{**fol.model_dump(), **update}))
         # the map's metric scale comes from circles of photos around the rotation axis

@@ -160,23 +160,61 @@ def test_follows_a_path_with_turn_slip_and_reaches_the_goal(tmp_path):
     assert res.localizations >= 4
 
 
-def test_without_localization_odometry_drifts_but_following_never_crashes(tmp_path):
+@pytest.mark.parametrize("compass_std_deg", [0.0, 2.0])
+def test_without_localization_odometry_drifts_but_the_compass_keeps_the_heading(
+    tmp_path, compass_std_deg
+):
     robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.1)
     loc = OracleLocalizer(robot, fail=lambda k: True)  # every photo fails
+    with CaptureLog(tmp_path / "log.jsonl") as log:
+        f = PathFollower(
+            robot,
+            NullCamera(),
+            loc,
+            GridPlanner(_open_grid()),
+            FollowConfig(camera_forward_m=CAM_FWD, compass_std_deg=compass_std_deg),
+            tmp_path,
+            log,
+            initial_pose=Pose2D(0.0, 0.0, 0.0),
+        )
+        res = f.follow(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]))
+    assert res.reached and not res.localized_at_goal
+    assert res.failed_localizations > 3 and res.localizations == 0
+    miss = math.hypot(robot.true[0] - 2.0, robot.true[1] - 2.0)
+    end = [r for r in read_log(tmp_path / "log.jsonl") if r["event"] == "follow_end"][-1]
+    if compass_std_deg == 0:
+        # the slipped 90 deg turn (9 deg short) left the robot off the goal: odometry alone
+        assert miss > 0.1 and end["compass_updates"] == 0
+    else:
+        # the compass read after the turn corrects the heading before the robot drives on
+        assert miss < 0.05 and end["compass_updates"] >= 2 and end["compass_rejected"] == 0
+
+
+def test_a_disturbed_compass_reading_is_ignored(tmp_path):
+    """A reading far beyond the heading's uncertainty (a magnet, a steel desk) is not fused."""
+
+    class Disturbed(KinematicRobot):
+        def sense(self):
+            r = super().sense()
+            if 1.0 < self.true[0] < 1.6:  # a disturbance over part of the first leg
+                return SensorReading(
+                    r.t, (r.compass_deg + 40.0) % 360, 255, False, False, r.odometry
+                )
+            return r
+
+    robot = Disturbed((0.0, 0.0, 0.0), turn_slip=0.0)
     f = PathFollower(
         robot,
         NullCamera(),
-        loc,
+        OracleLocalizer(robot, fail=lambda k: True),
         GridPlanner(_open_grid()),
-        FollowConfig(camera_forward_m=CAM_FWD),
+        FollowConfig(camera_forward_m=CAM_FWD, localize_every_m=0.2),
         tmp_path,
         initial_pose=Pose2D(0.0, 0.0, 0.0),
     )
-    res = f.follow(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]))
-    assert res.reached and not res.localized_at_goal
-    assert res.failed_localizations > 3 and res.localizations == 0
-    # the slipped turn left the robot off the goal: it really ran on odometry
-    assert math.hypot(robot.true[0] - 2.0, robot.true[1] - 2.0) > 0.1
+    res = f.follow(np.array([[0.0, 0.0], [2.0, 0.0]]))
+    assert res.reached and f.compass_rejected >= 1
+    assert math.hypot(robot.true[0] - 2.0, robot.true[1]) < 0.05
 
 
 def test_intermittent_localization_failures_are_retried_after_moving(tmp_path):
