@@ -133,3 +133,37 @@ def test_empty_freespace_and_zero_candidates_are_named():
     empty = FreeSpace(np.zeros_like(fs.mask), fs.origin, fs.resolution, fs.segments, 0.15)
     with pytest.raises(FreeSpaceError, match=r"round_003.*empty"):
         sample_candidates(empty, 10, np.random.default_rng(0), "round_003")
+
+
+def test_points_hundreds_of_metres_out_are_left_out_of_the_mesh(tmp_path, caplog):
+    """A few triangulations of nearly parallel rays land hundreds of metres away; they must
+    not stretch the mesh or the free-space raster (that raster would not fit in memory)."""
+    from scenebot.score.freespace import FreeSpaceError
+
+    V, F = syn.room(size=ROOM, cell_m=0.5)
+    R, t, _ = syn.ring_sources(RINGS, 12)
+    K = syn.default_intrinsics()
+    rng = np.random.default_rng(2)
+    pts, _ = syn.sample_surface(V, F, 6000, rng)
+    seen = syn.visible_mask(V, F, R, t, K, pts)
+    c0 = -R[0].T @ t[0]
+    far = np.array([c0 + d * R[0][2] for d in (60.0, 300.0, 840.0)])  # along camera 0's axis
+    seen_far = np.zeros((len(R), len(far)), bool)
+    seen_far[[0, 1]] = True
+    sfm = tmp_path / "office" / "round_001" / "sfm"
+    syn.write_colmap_model(sfm, K, R, t, np.r_[pts, far], np.c_[seen, seen_far], rng)
+
+    def outputs(name):
+        d = tmp_path / name
+        d.mkdir()
+        return MeshOutputs(d / "mesh.ply", d / "fs.json", d / "fs.npz", None)
+
+    with caplog.at_level("WARNING"):
+        summary = run_mesh(MeshConfig(), MeshInputs(sfm), outputs("kept"))
+    assert "3 3D point(s) farther than mesh.max_point_range_m" in caplog.text
+    Vm, _ = read_mesh(tmp_path / "kept" / "mesh.ply")
+    assert np.all(np.abs(Vm[:, :2]) < np.array(ROOM) / 2 + 0.5)
+    assert summary["free_area_m2"] < ROOM[0] * ROOM[1]
+    # kept, they swamp Poisson's octree (the room's mesh comes out empty) or the raster
+    with pytest.raises((FreeSpaceError, MeshError)):
+        run_mesh(MeshConfig(max_point_range_m=1e4), MeshInputs(sfm), outputs("all"))

@@ -348,3 +348,36 @@ def test_photos_registered_far_from_the_robots_own_estimate_are_left_out():
     assert rec.num_reg_images() == n - 1
     assert all(p.track.length() >= 2 for p in rec.points3D.values())
     assert drop_misplaced(rec, photos, (0.1, 0.0), 0.0) == {}  # off
+
+
+def test_photos_registered_off_their_compass_heading_are_left_out():
+    """drop_off_compass: a photo whose registered heading is 25 deg from its compass reading
+    leaves the map; 5 deg (compass noise) stays; photos without a compass are not judged."""
+    import math
+
+    import pycolmap
+
+    from scenebot.sfm.photos import Photo
+    from scenebot.sfm.stage import drop_off_compass
+
+    opts = pycolmap.SyntheticDatasetOptions()
+    opts.num_rigs, opts.num_cameras_per_rig, opts.num_frames_per_rig = 1, 1, 8
+    opts.num_points3D = 200
+    rec = pycolmap.synthesize_dataset(opts)
+    photos = []
+    for k, iid in enumerate(sorted(rec.reg_image_ids())):
+        im = rec.image(iid)
+        fwd = im.cam_from_world().rotation.matrix()[2]
+        deg = math.degrees(math.atan2(fwd[1], fwd[0])) + {2: 5.0, 5: -25.0}.get(k, 0.0)
+        photos.append(Photo(name=im.name, path=None, compass_deg=None if k == 0 else deg % 360))
+    n = rec.num_reg_images()
+    out = drop_off_compass(rec, photos, 12.0)
+    assert list(out) == [photos[5].name] and out[photos[5].name] == pytest.approx(25.0)
+    assert rec.num_reg_images() == n - 1
+    assert all(p.track.length() >= 2 for p in rec.points3D.values())
+    assert drop_off_compass(rec, photos, 0.0) == {}  # off
+    # a camera mounted looking 90 deg left of the robot's forward axis
+    for p in photos:
+        if p.compass_deg is not None:
+            p.compass_deg = (p.compass_deg - 90.0) % 360
+    assert set(drop_off_compass(rec, photos, 12.0, camera_yaw_deg=90.0)) == set()

@@ -37,6 +37,13 @@ class MeshConfig(BaseModel):
     min_points: int = Field(
         50, ge=4, description="Fewer usable 3D points than this is an error (count)."
     )
+    max_point_range_m: float = Field(
+        12.0,
+        gt=0.0,
+        description="3D points farther than this (m) from every camera are not meshed: "
+        "triangulations of nearly parallel rays, hundreds of metres out, that would stretch "
+        "the mesh and the free-space raster over nothing (a room is a few metres).",
+    )
     robot_radius_m: float = Field(
         0.15, gt=0.0, description="Robot footprint radius (m): free space keeps this from walls."
     )

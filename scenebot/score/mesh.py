@@ -109,7 +109,12 @@ def check_mesh(verts: np.ndarray, faces: np.ndarray, where: str) -> None:
 
 
 def build_mesh(
-    xyz: np.ndarray, view_dir: np.ndarray, track_len: np.ndarray, cfg: MeshConfig, where: str
+    xyz: np.ndarray,
+    view_dir: np.ndarray,
+    track_len: np.ndarray,
+    cfg: MeshConfig,
+    where: str,
+    centres: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mesh of a sparse map.
 
@@ -119,6 +124,8 @@ def build_mesh(
         track_len: (N,) observations per point.
         cfg: mesh settings.
         where: round name for error messages.
+        centres: (S, 3) camera centres (m): points farther than ``cfg.max_point_range_m``
+            from all of them are left out (logged).
 
     Returns:
         vertices (V, 3), faces (F, 3).
@@ -127,6 +134,20 @@ def build_mesh(
         MeshError: too few points, or an empty/degenerate result.
     """
     keep = track_len >= cfg.min_track_length
+    if centres is not None and len(centres):
+        from scipy.spatial import cKDTree
+
+        far = cKDTree(np.asarray(centres, float)).query(xyz)[0] > cfg.max_point_range_m
+        if far.any():
+            log.warning(
+                "%s: %d 3D point(s) farther than mesh.max_point_range_m = %g m from every "
+                "camera left out of the mesh (farthest %.0f m)",
+                where,
+                int(far.sum()),
+                cfg.max_point_range_m,
+                float(np.linalg.norm(xyz[far] - np.median(centres, 0), axis=1).max()),
+            )
+        keep &= ~far
     if keep.sum() < cfg.min_points:
         raise MeshError(
             f"{where}: only {int(keep.sum())} 3D points with >= {cfg.min_track_length} "

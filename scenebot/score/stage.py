@@ -61,7 +61,7 @@ def run_mesh(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs) -> dict:
     smap = read_sparse_map(inputs.sfm_dir)
     if len(smap.names) == 0:
         raise MeshError(f"{where}: the map in {inputs.sfm_dir} has no registered images")
-    V, F = build_mesh(smap.xyz, smap.view_dir, smap.track_len, cfg, where)
+    V, F = build_mesh(smap.xyz, smap.view_dir, smap.track_len, cfg, where, smap.centres)
     write_mesh(outputs.mesh_ply, V, F)
     cam_xy = smap.centres[:, :2]
     fs = compute_freespace(

@@ -137,6 +137,15 @@ class SfmConfig(BaseModel):
             "named in the log and report.json; 0 turns the check off."
         ),
     )
+    max_compass_deviation_deg: float = Field(
+        12.0,
+        ge=0.0,
+        description=(
+            "With sfm.use_compass: a photo registered with a heading farther than this "
+            "(deg) from its compass reading is left out of the map (a wrong rotation; its "
+            "position is wrong too), named in the log and report.json; 0 turns it off."
+        ),
+    )
     update_keep_previous_poses: bool = Field(
         True,
         description=(

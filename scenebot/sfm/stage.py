@@ -201,6 +201,50 @@ def drop_misplaced(
     return out
 
 
+def drop_off_compass(
+    rec: pycolmap.Reconstruction,
+    photos: list[Photo],
+    max_deviation_deg: float,
+    camera_yaw_deg: float = 0.0,
+) -> dict[str, float]:
+    """Deregister photos whose registered heading differs from their compass reading by more
+    than ``max_deviation_deg``. The map's x axis is compass heading 0 (a robust fit over all
+    photos, :mod:`scenebot.sfm.align`), so a photo's heading and its compass agree within
+    the compass noise; a run of photos registered with a wrong rotation (a scratch mapping
+    of the office once put part of a circle 20-30 deg and decimetres off) does not, and its
+    position is wrong too. Photos without a compass reading are not checked.
+
+    Args:
+        rec: the model, already in the robot frame (modified).
+        photos: the photo set.
+        max_deviation_deg: the allowed difference (deg); 0 or less turns the check off.
+        camera_yaw_deg: yaw of the camera's optical axis relative to the robot's forward
+            axis (deg).
+
+    Returns:
+        Name -> heading difference (deg) of the photos taken out.
+    """
+    if max_deviation_deg <= 0:
+        return {}
+    by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
+    out: dict[str, float] = {}
+    for p in photos:
+        iid = by_name.get(p.name)
+        if iid is None or p.compass_deg is None or not math.isfinite(p.compass_deg):
+            continue
+        view = rec.image(iid).cam_from_world().rotation.matrix()[2]  # optical axis, world
+        heading = math.degrees(math.atan2(view[1], view[0])) - camera_yaw_deg
+        d = abs((heading - p.compass_deg + 180.0) % 360.0 - 180.0)
+        if d > max_deviation_deg:
+            rec.deregister_frame(rec.image(iid).frame_id)
+            out[p.name] = d
+    if out:
+        for pid in list(rec.point3D_ids()):
+            if rec.point3D(pid).track.length() < 2:
+                rec.delete_point3D(pid)
+    return out
+
+
 def write_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
     """Write ``rec`` as a COLMAP binary model into ``model_dir`` (created)."""
     model_dir.mkdir(parents=True, exist_ok=True)
@@ -324,6 +368,19 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         mres.dropped.update(
             {n: f"registered {d:.2f} m from the robot's own estimate" for n, d in misplaced.items()}
         )
+    if cfg.use_compass:
+        turned = drop_off_compass(rec, photos, cfg.max_compass_deviation_deg, cfg.camera_yaw_deg)
+        if turned:
+            log.warning(
+                "%d photo(s) registered with a heading far from their compass reading "
+                "(> sfm.max_compass_deviation_deg = %g deg), left out of the map: %s",
+                len(turned),
+                cfg.max_compass_deviation_deg,
+                ", ".join(f"{n} ({d:.0f} deg)" for n, d in turned.items()),
+            )
+            mres.dropped.update(
+                {n: f"registered {d:.0f} deg off its compass reading" for n, d in turned.items()}
+            )
     first = alignment  # the metric scale found on the mapped model (report.json "scale")
     total_scale = alignment.scale
 
