@@ -391,6 +391,7 @@ class PathFollower:
         goal = path[-1].copy()
         self._goal_index = goal_index
         res = self._result = FollowResult(False, "", self.pose, math.inf)
+        self.compass_updates = self.compass_rejected = 0  # per goal, in follow_end
         self._event("follow_start", goal=goal.tolist(), waypoints=path.tolist())
         retries = 0
         try:
