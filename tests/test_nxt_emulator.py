@@ -407,10 +407,16 @@ def test_keyboard_interrupt_stops_motors_and_camera_port(tmp_path):
     robot, _cam = robot_on_emulator(tmp_path)
     emu = robot.emulator
     timer = threading.Timer(0.3, _thread.interrupt_main)
-    with pytest.raises(KeyboardInterrupt), robot:
-        timer.start()
-        robot.drive(5.0)
-    timer.join()
+    # Python's own Ctrl-C handler: a process started in the background by a non-interactive
+    # shell (nohup ... &) inherits SIGINT ignored, and interrupt_main() then does nothing
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt), robot:
+            timer.start()
+            robot.drive(5.0)
+        timer.join()
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert not emu.motors_running()
     assert emu.motors[robot.camera_port].power == 0
 
