@@ -143,6 +143,63 @@ def test_lever_arm_scale_and_circle_priors(round0):
     assert math.hypot(*off) == pytest.approx(0.10, rel=1e-6)
 
 
+def _bend_circles(rec, factors, per_circle=12):
+    """Scale the radius of each circle of ``per_circle`` photos about its axis (the mean of
+    its evenly spaced centres) by ``factors``: a map bent like one with misregistered runs."""
+    ids = sorted(rec.reg_image_ids(), key=lambda i: rec.image(i).name)
+    for c, f in enumerate(factors):
+        group = ids[c * per_circle : (c + 1) * per_circle]
+        axis = np.mean([rec.image(i).projection_center() for i in group], axis=0)
+        for i in group:
+            im = rec.image(i)
+            rot = im.cam_from_world().rotation
+            centre = axis + f * (im.projection_center() - axis)
+            rec.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(rot, -rot.matrix() @ centre)
+
+
+@pytest.mark.parametrize("remaps", [0, 2])
+def test_a_map_whose_circles_disagree_on_the_scale_is_mapped_again(round0, monkeypatch, remaps):
+    """The first mapping run comes back bent (circle radii x1.10, x0.99, x1.04: the circles'
+    own scales 10 % apart, none far enough out to be rejected): with re-mapping allowed the
+    stage maps again with the next seed and keeps the run whose circles agree; without, the
+    bent map's scale error stays."""
+    import scenebot.sfm.stage as stage
+
+    base, cap, _, _, _ = round0
+    real = stage.map_photos
+    seeds = []
+
+    def bent_first(*args, **kwargs):
+        res = real(*args, **kwargs)
+        seeds.append(args[4].random_seed)
+        if len(seeds) == 1:
+            _bend_circles(res.reconstruction, (1.10, 0.99, 1.04))
+        return res
+
+    monkeypatch.setattr(stage, "map_photos", bent_first)
+    cfg = SfmConfig(
+        exhaustive_max_images=10,
+        plots=False,
+        camera_offset_m=0.10,
+        num_threads=1,
+        scale_remap_attempts=remaps,
+    )
+    out = SfmOutputs(base / f"bent_{remaps}")
+    report = run(cfg, SfmInputs(base / "sfm_db" / "database.db", [cap]), out)
+    checked = report["scale"]["mapping_runs_checked"]
+    assert checked[0]["circle_scale_spread"] > 0.08
+    acc = json.loads(out.accuracy.read_text())
+    if remaps == 0:
+        assert len(seeds) == 1 and [c["kept"] for c in checked] == [True]
+        assert acc["metric_scale_error"] > 0.025
+    else:
+        assert seeds == [0, cfg.mapping_attempts]  # the next seed after mapping_attempts'
+        assert [c["kept"] for c in checked] == [False, True]
+        assert checked[1]["circle_scale_spread"] < cfg.max_circle_scale_spread
+        assert report["registered"] == 36
+        assert acc["metric_scale_error"] < 0.01
+
+
 def test_photos_off_their_circle_are_moved_back(round0):
     """A run of 3 photos of one circle displaced by 15 cm (a misregistration) goes back onto
     its circle; the rest stays put."""

@@ -228,6 +228,26 @@ class SfmConfig(BaseModel):
     circle_prior_iterations: int = Field(
         2, ge=1, description="Rounds of circle re-fit and prior bundle adjustment."
     )
+    max_circle_scale_spread: float = Field(
+        0.05,
+        gt=0.0,
+        description=(
+            "With sfm.camera_offset_m: when the circles of photos turned in place, each "
+            "fitted on its own, give metric scales further apart than this share (max - "
+            "min over their mean) on a map mapped from scratch, the map is bent (runs of a "
+            "circle misregistered: in the office a 10 % spread came with a 2.5 % scale error, "
+            "1-3 % spreads with 0.1-0.5 %) and mapping runs again with another seed, up to "
+            "sfm.scale_remap_attempts times; the map whose circles agree best is kept."
+        ),
+    )
+    scale_remap_attempts: int = Field(
+        2,
+        ge=0,
+        description=(
+            "Extra mapping runs (seeds after those of sfm.mapping_attempts) when the circles "
+            "disagree on the scale (sfm.max_circle_scale_spread); 0 = never re-map."
+        ),
+    )
     min_odometry_pairs: int = Field(
         5, ge=2, description="Consecutive photo pairs needed to fit the metric scale to odometry."
     )

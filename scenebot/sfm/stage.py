@@ -26,13 +26,13 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from scenebot.sfm.align import align_to_robot_frame, robot_frame_transform
+from scenebot.sfm.align import Alignment, align_to_robot_frame, robot_frame_transform
 from scenebot.sfm.circles import repair_circles
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.descriptors import collect_point_descriptors, write_point_descriptors
 from scenebot.sfm.evaluate import evaluate_accuracy
 from scenebot.sfm.features import check_database_photos, extract, match_pairs, open_database
-from scenebot.sfm.mapping import SfmError, map_photos, mapping_options
+from scenebot.sfm.mapping import MappingResult, SfmError, map_photos, mapping_options
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
 
@@ -245,6 +245,96 @@ def drop_off_compass(
     return out
 
 
+def circle_scale_spread(alignment: Alignment) -> float | None:
+    """How far apart the metric scales of the turn-in-place circles, each fitted on its
+    own, lie: (max - min) / mean over the circles the lever-arm scale used; ``None`` when
+    the scale does not come from two or more circles."""
+    if alignment.scale_source != "camera_lever_arm":
+        return None
+    scales = [c["scale"] for c in alignment.stats.get("circles", []) if c.get("used")]
+    if len(scales) < 2:
+        return None
+    return float(np.ptp(scales) / np.mean(scales))
+
+
+def _remap_while_circles_disagree(
+    cfg: SfmConfig,
+    mres: MappingResult,
+    alignment: Alignment,
+    db_path: Path,
+    root: Path,
+    names: list[str],
+    work: Path,
+    fix_focal: bool,
+    photos: list[Photo],
+    known: tuple[str, str, float] | None,
+    align_kw: dict,
+) -> tuple[MappingResult, Alignment, list[dict]]:
+    """Map again from scratch with other seeds while the circles of photos turned in place
+    disagree on the metric scale by more than ``cfg.max_circle_scale_spread`` (a bent map:
+    runs of a circle misregistered bend its radius, and the lever-arm scale with it), at most
+    ``cfg.scale_remap_attempts`` times; keep the map whose circles agree best among those
+    that register as many photos as the first (within 2 %). Maps continued from the
+    previous round are not re-run (their scale is the previous round's).
+
+    Returns:
+        The kept mapping result and its alignment (model not yet moved), and one record per
+        mapping run checked: seed, photos registered, circle scale spread, seconds, kept.
+    """
+    spread = circle_scale_spread(alignment)
+    if spread is None or mres.mode == "incremental":
+        return mres, alignment, []
+    first_seed = cfg.random_seed + max(mres.attempts, 1) - 1
+    runs = [
+        {
+            "seed": first_seed,
+            "registered": mres.reconstruction.num_reg_images(),
+            "circle_scale_spread": spread,
+            "seconds": mres.seconds,
+        }
+    ]
+    best = (spread, mres, alignment, 0)
+    n_first = mres.reconstruction.num_reg_images()
+    for k in range(cfg.scale_remap_attempts):
+        if best[0] <= cfg.max_circle_scale_spread:
+            break
+        seed = cfg.random_seed + cfg.mapping_attempts + k
+        log.warning(
+            "the circles of photos turned in place disagree on the metric scale by %.1f %% "
+            "(sfm.max_circle_scale_spread = %.1f %%): the map is bent; mapping again from "
+            "scratch with seed %d (%d of sfm.scale_remap_attempts = %d)",
+            100 * best[0],
+            100 * cfg.max_circle_scale_spread,
+            seed,
+            k + 1,
+            cfg.scale_remap_attempts,
+        )
+        run_cfg = cfg.model_copy(update={"random_seed": seed, "mapping_attempts": 1})
+        try:
+            m2 = map_photos(db_path, root, names, work / f"remap_{k}", run_cfg, fix_focal=fix_focal)
+            a2 = robot_frame_transform(m2.reconstruction, photos, known_distance=known, **align_kw)
+        except (SfmError, ValueError) as exc:
+            log.warning("mapping again with seed %d failed: %s", seed, exc)
+            runs.append({"seed": seed, "failed": str(exc)})
+            continue
+        s2 = circle_scale_spread(a2)
+        n2 = m2.reconstruction.num_reg_images()
+        runs.append(
+            {"seed": seed, "registered": n2, "circle_scale_spread": s2, "seconds": m2.seconds}
+        )
+        if s2 is not None and s2 < best[0] and n2 >= 0.98 * n_first:
+            best = (s2, m2, a2, len(runs) - 1)
+    for i, r in enumerate(runs):
+        r["kept"] = i == best[3]
+    if len(runs) > 1:
+        log.info(
+            "kept mapping run with seed %d: circle scale spread %.1f %%",
+            runs[best[3]]["seed"],
+            100 * best[0],
+        )
+    return best[1], best[2], runs
+
+
 def write_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
     """Write ``rec`` as a COLMAP binary model into ``model_dir`` (created)."""
     model_dir.mkdir(parents=True, exist_ok=True)
@@ -323,8 +413,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         )
     mres = map_photos(db_path, root, names, work / "mapping", cfg, previous, fix_focal=fix_focal)
     timings["map"] = mres.seconds
-    rec = mres.reconstruction
-    n_reg = rec.num_reg_images()
+    n_reg = mres.reconstruction.num_reg_images()
     if n_reg < cfg.min_registered_share * len(photos) or n_reg < 3:
         listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
         raise SfmError(
@@ -334,28 +423,34 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             "Photos need overlap (neighbouring views sharing >= 1/3 of the scene) and "
             "texture; add photos between the dropped ones or lower sfm.min_registered_share."
         )
+
+    t = time.perf_counter()
+    kd = cfg.known_distance
+    align_kw = {
+        "camera_yaw_deg": cfg.camera_yaw_deg,
+        "use_compass": cfg.use_compass,
+        "min_odometry_pairs": cfg.min_odometry_pairs,
+        "previous": previous,
+        "camera_offset_m": cfg.camera_offset_m,
+        "min_circle_photos": cfg.min_circle_photos,
+    }
+    known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
+    alignment = robot_frame_transform(mres.reconstruction, photos, known_distance=known, **align_kw)
+    timings["align"] = time.perf_counter() - t
+    mres, alignment, scale_checks = _remap_while_circles_disagree(
+        cfg, mres, alignment, db_path, root, names, work, fix_focal, photos, known, align_kw
+    )
+    rec = mres.reconstruction
+    timings["map"] += sum(c.get("seconds", 0.0) for c in scale_checks[1:])
     if mres.dropped:
         log.warning(
             "%d photo(s) not in the map: %s",
             len(mres.dropped),
             "; ".join(f"{n} ({why})" for n, why in mres.dropped.items()),
         )
-
     t = time.perf_counter()
-    kd = cfg.known_distance
-    alignment = robot_frame_transform(
-        rec,
-        photos,
-        camera_yaw_deg=cfg.camera_yaw_deg,
-        use_compass=cfg.use_compass,
-        min_odometry_pairs=cfg.min_odometry_pairs,
-        known_distance=(kd.image_a, kd.image_b, kd.distance_m) if kd else None,
-        previous=previous,
-        camera_offset_m=cfg.camera_offset_m,
-        min_circle_photos=cfg.min_circle_photos,
-    )
     align_to_robot_frame(rec, alignment)
-    timings["align"] = time.perf_counter() - t
+    timings["align"] += time.perf_counter() - t
     misplaced = drop_misplaced(rec, photos, alignment.camera_offset_m, cfg.max_estimate_deviation_m)
     if misplaced:
         log.warning(
@@ -413,16 +508,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             num_threads=cfg.num_threads,
             constant_names=kept_previous,
         )
-        alignment = robot_frame_transform(
-            rec,
-            photos,
-            camera_yaw_deg=cfg.camera_yaw_deg,
-            use_compass=cfg.use_compass,
-            min_odometry_pairs=cfg.min_odometry_pairs,
-            previous=previous,
-            camera_offset_m=cfg.camera_offset_m,
-            min_circle_photos=cfg.min_circle_photos,
-        )
+        alignment = robot_frame_transform(rec, photos, **align_kw)
         align_to_robot_frame(rec, alignment)
         total_scale *= alignment.scale
         timings["circle_priors"] = time.perf_counter() - t
@@ -476,6 +562,8 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             "odometry_vs_lever_arm": first.stats.get("scale_odometry_vs_circles"),
             "circles_used": first.stats.get("circles_used", 0),
             "circles": first.stats.get("circles", []),
+            "circle_scale_spread": circle_scale_spread(first),
+            "mapping_runs_checked": scale_checks,
         },
         "alignment": alignment.as_dict(),
         "timings_s": timings,
