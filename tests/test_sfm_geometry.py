@@ -146,6 +146,26 @@ def test_lever_arm_scale_falls_back_to_odometry_without_usable_circles():
     assert al.scale == pytest.approx(s0, rel=0.03)
 
 
+def test_circles_lost_in_the_map_noise_give_no_scale():
+    """Camera centres scattered by 7 cm about 10 cm circles (small photos of a far scene):
+    the lever arm is not measurable, the circles are rejected and odometry gives the scale
+    (a workflow run at 320x240 took a 45 % wrong scale from such circles)."""
+    rng = np.random.default_rng(11)
+    photos, C, U, V = _robot_trajectory(rng, per_circle=18, offset=(0.1, 0.0))
+    s0, Cs, Us, Vs = _sfm_frame(rng, C, U, V, noise_m=0.07)
+    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=0.1)
+    assert al.scale_source == "odometry"
+    assert al.stats["scale_circles"] is None
+    assert all("off the fitted circle" in c["rejected"] for c in al.stats["circles"])
+    assert al.scale == pytest.approx(s0, rel=0.05)
+    # the same trajectory at 2 mm of noise: every circle counts
+    s1, Cs, Us, Vs = _sfm_frame(rng, C, U, V, noise_m=0.002)
+    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=0.1)
+    assert al.scale_source == "camera_lever_arm"
+    assert all(c["used"] for c in al.stats["circles"])
+    assert al.scale == pytest.approx(s1, rel=0.01)
+
+
 def test_turn_in_place_circles_and_outlier_circle_rejection():
     rng = np.random.default_rng(7)
     photos, C, _, V = _robot_trajectory(rng, n_spots=5, per_circle=12, offset=(0.1, 0.0))

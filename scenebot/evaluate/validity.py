@@ -251,10 +251,13 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
             }
         )
     if len(rows) < 3:
+        open_view = sum(e["true_hit_fraction"] < MIN_TRUE_HIT for e in excluded)
         raise EvaluationError(
-            f"only {len(rows)} of {len(pick)} candidates of {rdir.name} have a true view "
-            "(the others lie inside, against or outside the true scene): too few for a "
-            "correlation"
+            f"only {len(rows)} of {len(pick)} candidates of {rdir.name} have a true view: "
+            f"{open_view} look mostly past the true scene (< {MIN_TRUE_HIT:.0%} of pixels on "
+            f"it), {len(excluded) - open_view} stand against or inside it (median true depth "
+            f"< {MIN_TRUE_DEPTH_M} m); too few for a correlation. The map of {rdir.name} "
+            "disagrees with the truth there: see its sfm/accuracy.json and freespace.png"
         )
     score = np.array([r["score_deg"] for r in rows])
     quality = np.array([r["psnr"] for r in rows])

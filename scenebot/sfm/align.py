@@ -295,6 +295,7 @@ def fit_scale_to_circles(
     min_photos: int = 8,
     min_span_deg: float = 90.0,
     max_spread: float = 0.03,
+    max_rel_residual: float = 0.3,
 ) -> tuple[float | None, np.ndarray, dict]:
     """Metric scale from the camera's known lever arm about the rotation axis.
 
@@ -306,7 +307,10 @@ def fit_scale_to_circles(
     ``camera_offset_m / |u|``. Circles with fewer than ``min_photos`` photos or spanning
     less than ``min_span_deg`` of heading are not used (the axis and the lever arm are not
     separable on a short arc). With three or more circles, circles whose own radius lies
-    beyond ``max(3 robust sigma, max_spread)`` (relative) of the median are rejected.
+    beyond ``max(3 robust sigma, max_spread)`` (relative) of the median are rejected, and so
+    is a circle whose photos lie, in the median, farther than ``max_rel_residual`` of its
+    radius from its own fitted circle (the camera's swing about the axis is lost in the
+    map's noise: small photos of a far scene).
 
     Args:
         xy: (N, 2) camera centres in a heading-aligned horizontal frame (SfM units).
@@ -316,6 +320,8 @@ def fit_scale_to_circles(
         min_photos: fewest photos for a circle to be used.
         min_span_deg: smallest heading span (deg) for a circle to be used.
         max_spread: relative radius deviation always tolerated between circles.
+        max_rel_residual: largest median distance of a circle's photos from its fitted
+            circle, as a share of its radius, for it to be used.
 
     Returns:
         ``scale`` (m per unit, ``None`` when no circle is usable), the lever arm ``u``
@@ -333,14 +339,21 @@ def fit_scale_to_circles(
             d["rejected"] = f"heading span < {min_span_deg:g} deg"
         else:
             u_c, _, r_c = _fit_circles_lever_arm(xy, h, [g])
-            d["radius_units"] = float(np.linalg.norm(u_c))
+            radius_c = float(np.linalg.norm(u_c))
+            d["radius_units"] = radius_c
             d["residual_median_units"] = float(np.nanmedian(r_c))
-            usable.append(g)
+            if not d["residual_median_units"] <= max_rel_residual * radius_c:
+                d["rejected"] = (
+                    f"photos lie {d['residual_median_units'] / radius_c:.0%} of the radius "
+                    f"off the fitted circle (> {max_rel_residual:.0%})"
+                )
+            else:
+                usable.append(g)
         info.append(d)
     stats: dict = {"circles": info}
     if not usable:
         return None, np.zeros(2), stats
-    use = [d for d in info if "radius_units" in d]
+    use = [d for d in info if "radius_units" in d and "rejected" not in d]
     radii = np.array([d["radius_units"] for d in use])
     keep = np.ones(len(use), bool)
     if len(use) >= 3:
@@ -393,6 +406,7 @@ def robot_frame_transform(
     previous: pycolmap.Reconstruction | None = None,
     camera_offset_m: float | None = None,
     min_circle_photos: int = 8,
+    max_circle_residual: float = 0.3,
 ) -> Alignment:
     """The similarity from the model's frame to the robot frame (see module docstring).
 
@@ -409,6 +423,8 @@ def robot_frame_transform(
             axis: metric scale from circles of photos turned in place
             (:func:`fit_scale_to_circles`), odometry as fallback and cross-check.
         min_circle_photos: fewest photos of a turn-in-place circle used for the scale.
+        max_circle_residual: largest median residual of a circle's photos from its fitted
+            circle, as a share of its radius, for it to count in the scale.
 
     Returns:
         The alignment.
@@ -436,6 +452,7 @@ def robot_frame_transform(
         previous_centers=prev_c,
         camera_offset_m=camera_offset_m,
         min_circle_photos=min_circle_photos,
+        max_circle_residual=max_circle_residual,
     )
 
 
@@ -452,6 +469,7 @@ def fit_robot_frame(
     previous_centers: dict[str, np.ndarray] | None = None,
     camera_offset_m: float | None = None,
     min_circle_photos: int = 8,
+    max_circle_residual: float = 0.3,
 ) -> Alignment:
     """The robot-frame similarity from camera geometry arrays (core of
     :func:`robot_frame_transform`).
@@ -466,6 +484,7 @@ def fit_robot_frame(
             when set, the scale comes from turn-in-place circles (odometry is the fallback
             and a cross-check, both in ``stats``).
         min_circle_photos: fewest photos of a circle used for the lever-arm scale.
+        max_circle_residual: see :func:`robot_frame_transform`.
 
     Returns:
         The alignment.
@@ -533,14 +552,20 @@ def fit_robot_frame(
             turn_in_place_circles(ph),
             camera_offset_m,
             min_photos=min_circle_photos,
+            max_rel_residual=max_circle_residual,
         )
         stats.update(cstats)
         stats["scale_circles"] = circle_scale
         if circle_scale is None:
+            why = sorted({c.get("rejected", "") for c in cstats["circles"]} - {""})
             log.warning(
-                "sfm.camera_offset_m is set but no circle of >= %d photos turned in place "
-                "(>= 90 deg of heading) registered: metric scale from %s instead",
+                "sfm.camera_offset_m is set but no circle of photos turned in place is usable "
+                "for the scale (needs >= %d registered photos over >= 90 deg of heading, "
+                "within sfm.max_circle_residual = %.0f %% of the radius of its fitted circle; "
+                "seen: %s): metric scale from %s instead",
                 min_circle_photos,
+                100 * max_circle_residual,
+                "; ".join(why) or "no turn-in-place circle",
                 "odometry" if odo_scale else "no source",
             )
         elif odo_scale:

@@ -208,6 +208,16 @@ class SfmConfig(BaseModel):
             "heading) for it to count in the lever-arm scale (sfm.camera_offset_m)."
         ),
     )
+    max_circle_residual: float = Field(
+        0.3,
+        gt=0.0,
+        description=(
+            "A turn-in-place circle counts in the lever-arm scale only when its photos lie, "
+            "in the median, within this share of its radius from the circle fitted to them "
+            "(office at 640x480: 3-14 %; at 320x240 with 17 photos per circle 60-75 %, and "
+            "a scale 45 % off). Without a usable circle the scale comes from odometry."
+        ),
+    )
     circle_prior_std_m: float = Field(
         0.005,
         ge=0.0,

@@ -433,6 +433,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         "previous": previous,
         "camera_offset_m": cfg.camera_offset_m,
         "min_circle_photos": cfg.min_circle_photos,
+        "max_circle_residual": cfg.max_circle_residual,
     }
     known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
     alignment = robot_frame_transform(mres.reconstruction, photos, known_distance=known, **align_kw)
