@@ -10,6 +10,7 @@ import pytest
 
 from scenebot.dense import stage
 from scenebot.dense import workspace as ws
+from scenebot.dense.colmap_io import read_array
 from scenebot.dense.config import DenseConfig
 from scenebot.dense.evaluate import depth_map_metrics, mesh_raycaster
 from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
@@ -48,6 +49,20 @@ def test_end_to_end(capture, tmp_path):
         assert m["coverage"] > 0.4
         accs.append(m["accuracy"])
     assert np.mean(accs) > 0.9
+    # plane completion: the room's planes found; what it filled lies on the true surface
+    pf = summary["plane_fill"]
+    assert len(pf["planes"]) >= 2 and pf["measured_fraction"] > 0.4
+    rel_errors = []
+    for v in views:
+        d, _ = ws.read_maps(out.dense_dir, v.name, "geometric")
+        measured = read_array(
+            out.dense_dir / "stereo/depth_maps_measured" / f"{v.name}.geometric.bin"
+        )
+        filled = (d > 0) & (measured == 0) & np.isfinite(v.depth)
+        rel_errors.append(np.abs(d[filled] - v.depth[filled]) / v.depth[filled])
+    rel_errors = np.concatenate(rel_errors)
+    assert len(rel_errors) > 0.005 * len(views) * W * H
+    assert np.mean(rel_errors < 0.02) > 0.9
     # the fused cloud lies on the true surface
     pts = np.asarray(o3d.io.read_point_cloud(str(out.fused_ply)).points)
     dist = mesh_raycaster(sc.vertices, sc.triangles).compute_distance(

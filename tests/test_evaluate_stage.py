@@ -188,6 +188,14 @@ def test_the_stage_writes_the_round_evaluation(tmp_path, scene, surf):
     assert ev["dense"]["1cm"]["completeness"] == pytest.approx(expect, abs=0.01)
     assert ev["sfm"]["per_photo_position_error_m"] == [0.01]
     assert ev["alignment"]["scale"] == pytest.approx(S_TRUE, rel=1e-6)
+    # the breakdown: 8 photos see part of the room; the materials partition the area
+    b = ev["dense"]["breakdown"]
+    assert 0.0 < b["photographed_share"] < 1.0
+    assert sum(c["area_share"] for c in b["by_views"]) == pytest.approx(1.0)
+    assert sum(m["area_share"] for m in b["by_material"]) == pytest.approx(1.0)
+    assert {m["material"] for m in b["by_material"]} <= {"carpet", "poster", "cardboard"}
+    unseen = next(c for c in b["by_views"] if c["views"] == "0")
+    assert unseen["area_share"] > 0.0
     saved = json.loads(outs.json.read_text())
     assert saved["dense"]["points"] == int(keep.sum())
     assert outs.png.stat().st_size > 20_000 and obs.is_file()

@@ -71,6 +71,74 @@ class PatchMatchConfig(BaseModel):
     seed: int = Field(0, description="Random seed of the hypothesis initialisation.")
 
 
+class PlaneFillConfig(BaseModel):
+    """Plane completion of the depth maps before fusion (:mod:`scenebot.dense.planefill`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    enabled: bool = Field(
+        True,
+        description=(
+            "Fill holes of the depth maps (plain walls, floor, ceiling) from planes found in "
+            "the measured depth, where the hole's nearest measured neighbours lie on the plane."
+        ),
+    )
+    voxel_m: float = Field(0.02, gt=0, description="Voxel size (m) thinning the plane search.")
+    points_per_view: int = Field(
+        20000, ge=100, description="Measured points drawn per view for the plane search."
+    )
+    ransac_distance_m: float = Field(0.015, gt=0, description="RANSAC inlier distance (m).")
+    merge_angle_deg: float = Field(
+        5.0, gt=0, description="Planes closer than this (and 2 RANSAC distances) are one."
+    )
+    min_plane_share: float = Field(
+        0.005,
+        gt=0,
+        lt=1,
+        description="Smallest plane, as a share of the voxel points, that is used.",
+    )
+    max_planes: int = Field(24, ge=1, description="At most this many planes.")
+    extent_cell_m: float = Field(
+        0.1, gt=0, description="Cell (m) of the raster that holds a plane's extent."
+    )
+    extent_min_points: int = Field(
+        3, ge=1, description="Inliers a raster cell needs to belong to the plane's extent."
+    )
+    extent_close_cells: int = Field(
+        2, ge=0, description="Morphological closing (cells) of the extent: bridges small gaps."
+    )
+    label_distance_m: float = Field(
+        0.02, gt=0, description="A measured pixel lies on a plane within this distance (m) ..."
+    )
+    label_rel_distance: float = Field(
+        0.01, ge=0, description="... or this share of its depth, whichever is larger."
+    )
+    cell_px: int = Field(4, ge=1, description="Cell size (px) of the neighbour vote.")
+    max_gap_frac: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="A hole looks this far (share of the image width) for measured depth.",
+    )
+    min_votes: int = Field(
+        2, ge=1, le=8, description="Of the 8 directions, this many must find the same plane ..."
+    )
+    min_agreement: float = Field(
+        0.6, gt=0, le=1, description="... and this share of the directions that found depth."
+    )
+    extent_margin_m: float = Field(
+        0.05, ge=0, description="Filled points may lie this far (m) outside the plane's extent."
+    )
+    cull_behind: bool = Field(
+        True,
+        description=(
+            "Remove measured depth that lies behind a plane's extent along its ray (matches "
+            "through the floor on a repeating texture)."
+        ),
+    )
+    seed: int = Field(0, description="Seed of the point sampling and RANSAC.")
+
+
 class DenseConfig(BaseModel):
     """Settings of the dense stage: undistortion, view selection, depth estimation, fusion."""
 
@@ -120,6 +188,7 @@ class DenseConfig(BaseModel):
     fusion_max_normal_error_deg: float = Field(
         10.0, gt=0, description="Fusion: maximum normal angle difference, degrees."
     )
+    plane_fill: PlaneFillConfig = Field(default_factory=PlaneFillConfig)
     poisson_mesh: bool = Field(False, description="Also write a Poisson mesh of the fused cloud.")
     poisson_depth: int = Field(9, ge=5, le=12, description="Octree depth of the Poisson mesh.")
     plots: bool = Field(True, description="Write renders of the cloud and a depth/normal mosaic.")

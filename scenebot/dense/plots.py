@@ -14,6 +14,7 @@ import open3d as o3d
 import pycolmap
 
 from scenebot.dense import workspace as ws
+from scenebot.dense.colmap_io import read_array
 
 
 def splat(
@@ -139,7 +140,11 @@ def plot_depth_mosaic(
         row[0].set_title(Path(name).name)
         dm = np.where(valid, depth, np.nan)
         im = row[1].imshow(dm, cmap="turbo")
-        row[1].set_title(f"depth [m], {100 * valid.mean():.0f}% of pixels")
+        title = f"depth [m], {100 * valid.mean():.0f}% of pixels"
+        measured = dense_dir / "stereo" / "depth_maps_measured" / f"{name}.geometric.bin"
+        if measured.is_file():  # plane completion ran: say how much was measured
+            title += f" ({100 * np.mean(read_array(measured) > 0):.0f}% measured)"
+        row[1].set_title(title)
         fig.colorbar(im, ax=row[1], fraction=0.035)
         row[2].imshow(normal_to_rgb(normal))
         row[2].set_title("normal (camera frame)")

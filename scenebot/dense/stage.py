@@ -267,6 +267,29 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
     else:
         view_stats = _run_taichi(cfg, rec, plans, dense_dir)
     t_depth = time.perf_counter() - t0
+    fill_stats = None
+    if cfg.plane_fill.enabled:
+        from scenebot.dense.planefill import plane_fill
+
+        fill_views = []
+        for p in plans:
+            img = rec.image(p.image_id)
+            pose = img.cam_from_world()
+            fill_views.append((p.name, rec.camera(img.camera_id).calibration_matrix(),
+                               pose.rotation.matrix(), np.asarray(pose.translation),
+                               p.depth_range))  # fmt: skip
+        fill_stats = plane_fill(dense_dir, fill_views, cfg.plane_fill)
+        by_name = {v["name"]: v for v in fill_stats.pop("views")}
+        for st in view_stats:
+            v = by_name.get(st["name"], {})
+            st["fraction_plane_filled"] = v.get("filled")
+            st["fraction_culled_behind_plane"] = v.get("culled")
+        LOG.info(
+            "dense: %d planes; %.1f %% of the pixels filled from them, %.1f %% of measured "
+            "depth behind a plane removed (%.0f s)",
+            len(fill_stats["planes"]), 100 * fill_stats["filled_fraction"],
+            100 * fill_stats["culled_fraction"], fill_stats["seconds"],
+        )  # fmt: skip
     t0 = time.perf_counter()
     fused = fuse(cfg, dense_dir)
     t_fusion = time.perf_counter() - t0
@@ -288,6 +311,7 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
                        rec.camera(rec.image(plans[0].image_id).camera_id).height],
         "num_fused_points": int(fused.num_points3D()),
         "depth_seconds": t_depth,
+        "plane_fill": fill_stats,
         "fusion_seconds": t_fusion,
         "total_seconds": time.perf_counter() - t_start,
         "config": cfg.model_dump(),

@@ -80,6 +80,18 @@ def true_centers(captures: Sequence[Path]) -> dict[str, np.ndarray]:
     return out
 
 
+def true_photo_poses(captures: Sequence[Path]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(R_cam_from_world (3, 3), centre (3,)) of every photo with a true pose in the logs."""
+    poses = []
+    for cap in captures:
+        for rec in read_log(_log_path(cap)):
+            tr = rec.get("truth") or {}
+            if rec.get("type") == "photo" and tr.get("R_cam_from_world") is not None:
+                R = np.asarray(tr["R_cam_from_world"], np.float64)
+                poses.append((R, np.asarray(tr["center"], np.float64)))
+    return poses
+
+
 def robot_to_world(sfm_dir: Path, captures: Sequence[Path]) -> Similarity:
     """Fit the robot-frame -> world similarity to the registered photos' true centres,
     robustly (:func:`scenebot.sfm.evaluate.robust_similarity`).
@@ -124,7 +136,8 @@ def weighted_cloud_metrics(
     reference: np.ndarray,
     weights: np.ndarray | None = None,
     thresholds_m: Sequence[float] = (0.01, 0.02, 0.05),
-) -> dict[str, dict[str, float]]:
+    return_distances: bool = False,
+) -> dict[str, dict[str, float]] | tuple[dict[str, dict[str, float]], np.ndarray]:
     """Accuracy, area-weighted completeness and F-score of a cloud (world frame).
 
     Accuracy at tau: fraction of the cloud's points within tau of the true mesh (exact
@@ -140,9 +153,11 @@ def weighted_cloud_metrics(
         reference: (M, 3) samples of the observable surface (m).
         weights: (M,) their areas (m^2); None: uniform.
         thresholds_m: distances (m).
+        return_distances: also return each reference sample's distance to the cloud.
 
     Returns:
-        ``{"1cm": {"accuracy", "completeness", "fscore"}, ..., "median_error_m": {...}}``.
+        ``{"1cm": {"accuracy", "completeness", "fscore"}, ..., "median_error_m": {...}}``
+        (and the (M,) distances with ``return_distances``).
     """
     import open3d as o3d
     from scipy.spatial import cKDTree
@@ -170,7 +185,7 @@ def weighted_cloud_metrics(
         "accuracy": float(np.median(d_acc)),
         "completeness": float(d_comp[order][np.searchsorted(cw, 0.5 * cw[-1])]),
     }
-    return out
+    return (out, d_comp) if return_distances else out
 
 
 def read_cloud(path: Path, max_points: int, seed: int = 0) -> np.ndarray:

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from scenebot.capturelog import json_default
+from scenebot.evaluate.breakdown import completeness_breakdown, photo_view_counts
 from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.metrics import (
     EvaluationError,
@@ -35,6 +36,7 @@ from scenebot.evaluate.metrics import (
     localization_accuracy,
     read_cloud,
     robot_to_world,
+    true_photo_poses,
     weighted_cloud_metrics,
 )
 
@@ -230,11 +232,18 @@ def run(
             obs_file = str(inputs.observable) if inputs.observable else None
             out["observable"] = {**surf.summary(), "cached": cached, "file": obs_file}
             cloud = sim.apply(read_cloud(inputs.dense_cloud, ecfg.max_cloud_points, ecfg.seed))
-            m = weighted_cloud_metrics(
+            m, d_comp = weighted_cloud_metrics(
                 cloud, sc.vertices, sc.triangles, surf.observable_points,
-                surf.observable_weights, ecfg.thresholds_m,
+                surf.observable_weights, ecfg.thresholds_m, return_distances=True,
             )  # fmt: skip
             out["dense"] = {"cloud": str(inputs.dense_cloud), "points": len(cloud), **m}
+            views = photo_view_counts(
+                surf.observable_points, true_photo_poses(caps), sc, cfg.sim.camera.hfov_deg
+            )
+            out["dense"]["breakdown"] = completeness_breakdown(
+                d_comp, surf.observable_weights, views,
+                sc.material_ids[surf.triangle[surf.observable]], sc.materials, ecfg.thresholds_m,
+            )  # fmt: skip
     elif inputs.dense_cloud is None:
         out["notes"].append("no dense cloud given: dense metrics skipped")
     out["seconds"] = time.perf_counter() - t0
@@ -253,7 +262,7 @@ def plot_evaluation(ev: dict, png: Path, surf=None, cloud: np.ndarray | None = N
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(12, 9), dpi=100)
+    fig, axes = plt.subplots(2, 3, figsize=(18, 9), dpi=100)
     sfm = ev.get("sfm") or {}
     ax = axes[0, 0]
     pe = np.array(sfm.get("per_photo_position_error_m", [])) * 100
@@ -318,12 +327,49 @@ def plot_evaluation(ev: dict, png: Path, surf=None, cloud: np.ndarray | None = N
         ax.set_xlabel("x (m, world)")
     else:
         ax.set_axis_off()
+    _plot_breakdown(axes[0, 2], axes[1, 2], (dense or {}).get("breakdown"))
     fig.tight_layout()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(png)
     plt.close(fig)
     return png
+
+
+def _plot_breakdown(ax_mat, ax_views, b: dict | None, tau: str = "2cm", top: int = 10) -> None:
+    """Completeness by material (largest areas) and by the number of photos that saw it."""
+    if not b:
+        for ax in (ax_mat, ax_views):
+            ax.text(0.5, 0.5, "no completeness breakdown", ha="center", transform=ax.transAxes)
+            ax.set_axis_off()
+        return
+    rows = b["by_material"][:top][::-1]
+    y = np.arange(len(rows))
+    comp = [100 * (r["completeness"].get(tau) or 0) for r in rows]
+    seen = [100 * r["photographed_share"] for r in rows]
+    ax_mat.barh(y + 0.2, seen, 0.4, color="tab:gray", label="seen by >= 2 photos")
+    ax_mat.barh(y - 0.2, comp, 0.4, color="tab:orange", label=f"complete at {tau}")
+    labels = [
+        f"{r['material']} ({100 * r['area_share']:.0f}%, contrast {r['texture_contrast']:.0f})"
+        for r in rows
+    ]
+    ax_mat.set_yticks(y, labels, fontsize=8)
+    ax_mat.set_xlim(0, 105)
+    ax_mat.set_xlabel("% of the material's observable area")
+    ax_mat.legend(loc="lower right", fontsize=8)
+    ax_mat.set_title("by material (share of the area, texture contrast)")
+    cls = b["by_views"]
+    x = np.arange(len(cls))
+    ax_views.bar(x - 0.2, [100 * c["area_share"] for c in cls], 0.4, color="tab:gray",
+                 label="share of the observable area")  # fmt: skip
+    ax_views.bar(x + 0.2, [100 * (c["completeness"].get(tau) or 0) for c in cls], 0.4,
+                 color="tab:orange", label=f"complete at {tau}")  # fmt: skip
+    ax_views.set_xticks(x, [c["views"] for c in cls])
+    ax_views.set_xlabel("photos that see the surface")
+    ax_views.set_ylim(0, 105)
+    ax_views.set_ylabel("%")
+    ax_views.legend(loc="upper left", fontsize=8)
+    ax_views.set_title("lost in capture (0-1 photos) or in stereo (>= 2)")
 
 
 def main_summary(ev: dict) -> str:
@@ -354,6 +400,13 @@ def main_summary(ev: dict) -> str:
                 for k, v in d.items() if k.endswith("cm")
             )
         )  # fmt: skip
+        b = d.get("breakdown")
+        if b:
+            where = b["completeness_where_photographed"].get("2cm")
+            lines.append(
+                f"{100 * b['photographed_share']:.0f}% of the observable area seen by >= 2 "
+                f"photos, {100 * (where or 0):.0f}% of it complete at 2 cm"
+            )
     if not math.isnan(ev.get("seconds", float("nan"))):
         lines.append(f"({ev['seconds']:.1f} s)")
     return "; ".join(lines)

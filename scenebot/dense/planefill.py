@@ -1,0 +1,432 @@
+"""Plane completion of the depth maps: plain walls, floors and ceilings (a planar prior).
+
+Photometric stereo finds no depth on plain paint: there is nothing to match (the default
+office's walls have a texture contrast of about 3 grey levels against a sensor noise of
+1.5). Indoor scenes are mostly planes, and the measured depth around a plain region usually
+lies on the plane that spans it (a poster on the wall, the wall's edges, the pattern of the
+carpet). This step, between depth estimation and fusion:
+
+1. **Planes**: every view's measured (filtered) depth is back-projected and thinned to a
+   voxel grid; planes are peeled off the cloud by RANSAC (open3d ``segment_plane``), largest
+   first, while one still holds ``min_plane_share`` of the points. Each plane keeps its
+   extent: the cells of an in-plane raster that hold inliers, closed over small gaps.
+2. **Labels**: a measured pixel carries the label of the plane it lies on (within
+   ``distance_m`` or ``rel_distance`` of its depth), or "off-plane".
+3. **Votes**: on a grid of ``cell_px`` cells, every cell without measured depth looks along 8
+   directions, up to ``max_gap_frac`` of the image width, for the nearest cell with measured
+   depth; it is filled when at least ``min_votes`` of the found cells, and at least
+   ``min_agreement`` of them, carry the same plane label. A plain region bounded by its own
+   plane is filled; one bounded by something nearer (a plain cabinet face before a wall) is
+   not, because its nearest measured neighbours are the cabinet's edges.
+4. **Fill**: each hole pixel of a filled cell gets the depth where its ray meets the plane
+   (in front of the camera, inside the plane's extent grown by ``extent_margin_m``, within the
+   view's depth range) and the plane's normal, turned towards the camera.
+
+Fusion then needs the usual agreement of ``dense.fusion_min_num_pixels`` views, so a plane
+is only fused where several views filled it alike. The measured maps are kept in
+``stereo/depth_maps_measured`` for the pictures and for comparison.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+LOG = logging.getLogger(__name__)
+
+#: the 8 search directions (row step, column step)
+DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
+
+
+@dataclass
+class Plane:
+    """``normal @ x + offset = 0`` (unit normal) and its extent: the cells of an in-plane
+    raster that hold inliers (after a morphological closing that bridges small gaps).
+
+    Attributes:
+        normal: (3,) unit normal.
+        offset: the plane's offset (m).
+        basis: (2, 3) orthonormal in-plane axes.
+        origin: (3,) a point of the plane (inlier centroid).
+        cell_m: raster cell size (m).
+        lo: (2,) plane coordinates of the raster's corner.
+        occupied: (H, W) bool raster of the extent.
+        inliers: number of voxel points on it.
+    """
+
+    normal: np.ndarray
+    offset: float
+    basis: np.ndarray
+    origin: np.ndarray
+    cell_m: float
+    lo: np.ndarray
+    occupied: np.ndarray
+    inliers: int
+
+    def to_2d(self, x: np.ndarray) -> np.ndarray:
+        """(N, 3) points -> (N, 2) plane coordinates."""
+        return (np.asarray(x) - self.origin) @ self.basis.T
+
+    def inside(self, x: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """(N,) bool: the points' projections fall in the extent (grown by ``margin`` m)."""
+        occ = self.occupied
+        if margin > 0:
+            from scipy.ndimage import binary_dilation
+
+            grow = int(np.ceil(margin / self.cell_m))
+            occ = binary_dilation(occ, iterations=grow)
+        ij = np.floor((self.to_2d(x) - self.lo) / self.cell_m).astype(np.int64)
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < occ.shape[0]) & (ij[:, 1] >= 0)
+        ok &= ij[:, 1] < occ.shape[1]
+        out = np.zeros(len(ij), bool)
+        out[ok] = occ[ij[ok, 0], ij[ok, 1]]
+        return out
+
+    @property
+    def area_m2(self) -> float:
+        return float(self.occupied.sum()) * self.cell_m**2
+
+
+def plane_extent(
+    p2: np.ndarray, cell_m: float, min_points: int, close_cells: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Raster of the cells holding ``min_points`` in-plane points, closed over
+    ``close_cells`` cells; returns its corner and the (H, W) bool raster."""
+    from scipy.ndimage import binary_closing
+
+    lo = p2.min(0) - (close_cells + 1) * cell_m
+    ij = np.floor((p2 - lo) / cell_m).astype(np.int64)
+    shape = ij.max(0) + close_cells + 2
+    counts = np.zeros(shape, np.int32)
+    np.add.at(counts, (ij[:, 0], ij[:, 1]), 1)
+    occ = counts >= min_points
+    if close_cells > 0:
+        occ = binary_closing(occ, iterations=close_cells)
+    return lo, occ
+
+
+def _fit_plane(x: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares plane through points: unit normal and offset."""
+    c = x.mean(0)
+    n = np.linalg.svd(x - c, full_matrices=False)[2][-1]
+    return n, float(-n @ c)
+
+
+def detect_planes(
+    points: np.ndarray,
+    distance_m: float = 0.015,
+    min_share: float = 0.005,
+    max_planes: int = 24,
+    seed: int = 0,
+    cell_m: float = 0.1,
+    min_cell_points: int = 3,
+    close_cells: int = 2,
+    merge_angle_deg: float = 5.0,
+) -> list[Plane]:
+    """Peel planes off a cloud by RANSAC, largest first.
+
+    Each RANSAC plane is refitted by least squares to its inliers (and takes the points
+    within ``distance_m`` of the refit); a plane within ``merge_angle_deg`` and
+    ``2 * distance_m`` of one already found (a noisy floor peeled in slices) is merged into
+    it.
+
+    Args:
+        points: (N, 3) points (m).
+        distance_m: inlier distance of RANSAC.
+        min_share: stop when the next plane holds fewer than this share of ``points``.
+        max_planes: at most this many planes.
+        seed: RANSAC seed.
+        cell_m, min_cell_points, close_cells: the extent raster (:func:`plane_extent`).
+        merge_angle_deg: planes closer in angle (and offset) are one.
+
+    Returns:
+        The planes with their extents, largest first.
+    """
+    import open3d as o3d
+
+    o3d.utility.random.seed(seed)
+    rest = np.asarray(points, np.float64)
+    n_all = len(rest)
+    found: list[list[np.ndarray]] = []  # inlier sets
+    fits: list[tuple[np.ndarray, float]] = []
+    cos_merge = np.cos(np.radians(merge_angle_deg))
+    for _ in range(4 * max_planes):
+        if len(fits) >= max_planes or len(rest) < max(3, min_share * n_all):
+            break
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
+        _, idx = pcd.segment_plane(distance_m, 3, 500)
+        if len(idx) < max(3, min_share * n_all):
+            break
+        n, d = _fit_plane(rest[idx])
+        on = np.abs(rest @ n + d) < distance_m
+        if on.sum() < 3:
+            on[idx] = True
+        inl = rest[on]
+        c = inl.mean(0)
+        for k, (nk, dk) in enumerate(fits):
+            if abs(n @ nk) > cos_merge and abs(c @ nk + dk) < 2 * distance_m:
+                found[k].append(inl)
+                fits[k] = _fit_plane(np.concatenate(found[k]))
+                break
+        else:
+            found.append([inl])
+            fits.append((n, d))
+        rest = rest[~on]
+    planes: list[Plane] = []
+    for sets, (n, d) in zip(found, fits, strict=True):
+        inl = np.concatenate(sets)
+        origin = inl.mean(0)
+        e1 = np.cross(n, [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        basis = np.stack([e1, np.cross(n, e1)])
+        lo, occ = plane_extent((inl - origin) @ basis.T, cell_m, min_cell_points, close_cells)
+        if occ.any():
+            planes.append(Plane(n, d, basis, origin, cell_m, lo, occ, len(inl)))
+    planes.sort(key=lambda p: -p.inliers)
+    return planes
+
+
+def backproject(depth: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(H, W) z-depth -> (H, W, 3) world points (COLMAP pixel centres at +0.5)."""
+    h, w = depth.shape
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    x = (u - K[0, 2]) / K[0, 0] * depth
+    y = (v - K[1, 2]) / K[1, 1] * depth
+    cam = np.stack([x, y, depth.astype(np.float64)], -1)
+    return (cam - t) @ R  # R^T (x - t)
+
+
+def _nearest_labels(cell_label: np.ndarray, measured: np.ndarray, max_steps: int) -> np.ndarray:
+    """(8, h, w) label of the nearest measured cell in each direction (-2: none found)."""
+    h, w = cell_label.shape
+    out = np.full((len(DIRECTIONS), h, w), -2, np.int32)
+    rows, cols = np.mgrid[0:h, 0:w]
+    for k, (dr, dc) in enumerate(DIRECTIONS):
+        found = np.zeros((h, w), bool)
+        for s in range(1, max_steps + 1):
+            r, c = rows + dr * s, cols + dc * s
+            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w) & ~found
+            if not ok.any():
+                break
+            rr, cc = r[ok], c[ok]
+            hit = measured[rr, cc]
+            sel = np.flatnonzero(ok)[hit]
+            out[k].flat[sel] = cell_label[rr[hit], cc[hit]]
+            found.flat[sel] = True
+    return out
+
+
+def fill_view(
+    depth: np.ndarray,
+    normal: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    planes: list[Plane],
+    depth_range: tuple[float, float],
+    *,
+    distance_m: float = 0.02,
+    rel_distance: float = 0.01,
+    cell_px: int = 4,
+    max_gap_frac: float = 0.5,
+    min_votes: int = 2,
+    min_agreement: float = 0.6,
+    extent_margin_m: float = 0.05,
+    cull_behind: bool = True,
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Fill one view's holes from the planes (see the module docstring).
+
+    With ``cull_behind``, measured depth that lies behind a plane's extent along its ray
+    (beyond ``2 * distance_m`` and ``rel_distance``: a match through the floor on a
+    repeating carpet) is removed first.
+
+    Returns:
+        The depth and normal maps with the filled pixels, the number filled and the number
+        of measured pixels culled.
+    """
+    h, w = depth.shape
+    measured = depth > 0
+    if not planes or not measured.any():
+        return depth, normal, 0, 0
+    # every pixel's ray, and where it meets each plane's extent (inf: it misses it)
+    vv, uu = np.mgrid[0:h, 0:w]
+    ray_cam = np.stack([(uu + 0.5 - K[0, 2]) / K[0, 0], (vv + 0.5 - K[1, 2]) / K[1, 1],
+                        np.ones((h, w))], -1).reshape(-1, 3)  # fmt: skip
+    centre = -R.T @ t
+    ray = ray_cam @ R  # world directions with unit z in the camera
+    hits = np.full((len(planes), h * w), np.inf)
+    for j, pl in enumerate(planes):
+        denom = ray @ pl.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = -(centre @ pl.normal + pl.offset) / denom  # z-depth (ray has unit camera z)
+        ok = np.isfinite(z) & (z > 0)
+        ok[ok] = pl.inside(centre + z[ok, None] * ray[ok])
+        hits[j, ok] = z[ok]
+    culled = 0
+    if cull_behind:
+        # measured depth behind a plane's extent (seen through the floor): an outlier
+        flat_d = depth.reshape(-1)
+        behind = measured.reshape(-1) & (hits.min(0) < flat_d * (1 - rel_distance) - 2 * distance_m)
+        culled = int(behind.sum())
+        if culled:
+            depth = depth.copy()
+            normal = normal.copy()
+            depth.reshape(-1)[behind] = 0
+            normal.reshape(-1, 3)[behind] = 0
+            measured = depth > 0
+    X = backproject(depth, K, R, t)
+    label = np.full((h, w), -1, np.int32)  # -1: measured, off every plane
+    best = np.full((h, w), np.inf)
+    tol = np.maximum(distance_m, rel_distance * depth)
+    for j, pl in enumerate(planes):
+        dist = np.abs(X @ pl.normal + pl.offset)
+        on = measured & (dist < tol) & (dist < best)
+        label[on], best[on] = j, dist[on]
+    # cells: the most common label among a cell's measured pixels
+    hc, wc = -(-h // cell_px), -(-w // cell_px)
+    pad = ((0, hc * cell_px - h), (0, wc * cell_px - w))
+    lab = np.pad(np.where(measured, label, -3), pad, constant_values=-3)
+    lab = lab.reshape(hc, cell_px, wc, cell_px).transpose(0, 2, 1, 3).reshape(hc, wc, -1)
+    counts = np.stack([(lab == j).sum(-1) for j in range(-1, len(planes))], -1)
+    cell_measured = counts.sum(-1) > 0
+    cell_label = np.where(cell_measured, counts.argmax(-1) - 1, -2).astype(np.int32)
+    near = _nearest_labels(cell_label, cell_measured, max(1, int(max_gap_frac * wc)))
+    found = (near >= -1).sum(0)
+    votes = np.stack([(near == j).sum(0) for j in range(len(planes))])
+    winner = votes.argmax(0)
+    top = votes.max(0)
+    vote_ok = (top >= min_votes) & (top >= min_agreement * np.maximum(found, 1))
+    # a cell with measured depth on a plane fills its own holes with that plane
+    fill_label = np.where(cell_label >= 0, cell_label, np.where(vote_ok, winner, -1))
+    fill_label[cell_measured & (cell_label < 0)] = -1
+    px_label = np.repeat(np.repeat(fill_label, cell_px, 0), cell_px, 1)[:h, :w]
+    target = ~measured & (px_label >= 0)
+    if not target.any():
+        return depth, normal, 0, culled
+    v, u = np.nonzero(target)
+    flat = v * w + u
+    ray, hits = ray[flat], hits[:, flat]
+    out_d, out_n = depth.copy(), normal.copy()
+    filled = 0
+    lo, hi = depth_range
+    for j, pl in enumerate(planes):
+        m = px_label[v, u] == j
+        if not m.any():
+            continue
+        z = -(centre @ pl.normal + pl.offset) / (ray[m] @ pl.normal)
+        ok = np.isfinite(z) & (z > lo) & (z < hi) & (np.abs(ray[m] @ pl.normal) > 0.1)
+        pts = centre + z[:, None] * ray[m]
+        ok &= pl.inside(pts, extent_margin_m)
+        # another plane's extent in front of this one hides it (a floor before a phantom
+        # plane beneath it)
+        others = np.delete(hits[:, m], j, axis=0)
+        if len(others):
+            ok &= others.min(0) > z * (1 - rel_distance) - distance_m
+        if not ok.any():
+            continue
+        # normals face the camera: n . (centre - x) > 0
+        n_cam = R @ (pl.normal if centre @ pl.normal + pl.offset > 0 else -pl.normal)
+        vv, uu = v[m][ok], u[m][ok]
+        out_d[vv, uu] = z[ok]
+        out_n[vv, uu] = n_cam
+        filled += int(ok.sum())
+    return out_d, out_n, filled, culled
+
+
+def plane_fill(
+    dense_dir: Path,
+    views: list,
+    cfg,
+    progress: bool = True,
+) -> dict:
+    """Fill every view's geometric depth and normal maps from the scene's planes.
+
+    Args:
+        dense_dir: the dense workspace (``stereo/depth_maps/*.geometric.bin`` filtered).
+        views: ``(name, K, R, t, depth_range)`` per view.
+        cfg: :class:`~scenebot.dense.config.PlaneFillConfig`.
+        progress: show a progress bar.
+
+    Returns:
+        Stats: planes (normal, offset, inliers, extent area), pixels measured and filled per
+        view, seconds. The measured maps are moved to ``stereo/depth_maps_measured`` (and
+        ``normal_maps_measured``) first; a second run starts again from them.
+    """
+    import shutil
+    import time
+
+    from tqdm import tqdm
+
+    from scenebot.dense import workspace as ws
+    from scenebot.dense.colmap_io import read_array, write_array
+
+    t0 = time.perf_counter()
+    dense_dir = Path(dense_dir)
+    kept = {k: dense_dir / "stereo" / f"{k}_maps_measured" for k in ("depth", "normal")}
+    for k, folder in kept.items():
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, *_ in views:
+            src = ws.map_path(dense_dir, k, name, "geometric")
+            dst = folder / src.name
+            if not dst.is_file():
+                shutil.copy2(src, dst)
+
+    def measured(name: str) -> tuple[np.ndarray, np.ndarray]:
+        fname = ws.map_path(dense_dir, "depth", name, "geometric").name
+        return read_array(kept["depth"] / fname), read_array(kept["normal"] / fname)
+
+    # the planes, from every view's measured depth thinned to a voxel grid
+    rng = np.random.default_rng(cfg.seed)
+    pts = []
+    for name, K, R, t, _ in views:
+        d, _ = measured(name)
+        X = backproject(d, K, R, t)[d > 0]
+        if len(X) > cfg.points_per_view:
+            X = X[rng.choice(len(X), cfg.points_per_view, replace=False)]
+        pts.append(X)
+    cloud = np.concatenate(pts) if pts else np.zeros((0, 3))
+    if len(cloud):
+        keys = np.floor(cloud / cfg.voxel_m).astype(np.int64)
+        _, first = np.unique(keys, axis=0, return_index=True)
+        cloud = cloud[first]
+    planes = detect_planes(
+        cloud, cfg.ransac_distance_m, cfg.min_plane_share, cfg.max_planes, cfg.seed,
+        cfg.extent_cell_m, cfg.extent_min_points, cfg.extent_close_cells, cfg.merge_angle_deg,
+    )  # fmt: skip
+    LOG.info("dense: %d planes in %d voxel points", len(planes), len(cloud))
+    per_view = []
+    total_px = total_measured = total_filled = total_culled = 0
+    for name, K, R, t, rng_d in tqdm(views, desc="plane fill", unit="view", disable=not progress):
+        d, n = measured(name)
+        fd, fn, filled, culled = fill_view(
+            d, n, K, R, t, planes, rng_d,
+            distance_m=cfg.label_distance_m, rel_distance=cfg.label_rel_distance,
+            cell_px=cfg.cell_px, max_gap_frac=cfg.max_gap_frac, min_votes=cfg.min_votes,
+            min_agreement=cfg.min_agreement, extent_margin_m=cfg.extent_margin_m,
+            cull_behind=cfg.cull_behind,
+        )  # fmt: skip
+        write_array(ws.map_path(dense_dir, "depth", name, "geometric"), fd)
+        write_array(ws.map_path(dense_dir, "normal", name, "geometric"), fn)
+        n_meas = int((d > 0).sum())
+        per_view.append({"name": name, "measured": n_meas / d.size, "filled": filled / d.size,
+                         "culled": culled / d.size})  # fmt: skip
+        total_culled += culled
+        total_px += d.size
+        total_measured += n_meas
+        total_filled += filled
+    planes_out = []
+    for p in planes:
+        planes_out.append({"normal": p.normal.round(4).tolist(), "offset": round(p.offset, 4),
+                           "inliers": p.inliers, "area_m2": round(p.area_m2, 3)})  # fmt: skip
+    return {
+        "planes": planes_out,
+        "voxel_points": len(cloud),
+        "measured_fraction": total_measured / max(total_px, 1),
+        "filled_fraction": total_filled / max(total_px, 1),
+        "culled_fraction": total_culled / max(total_px, 1),
+        "views": per_view,
+        "seconds": time.perf_counter() - t0,
+    }

@@ -1,0 +1,146 @@
+"""Where the dense model's completeness is lost: not photographed, or photographed and not
+reconstructed (evaluation only: true poses and the true scene).
+
+The observable surface (:mod:`scenebot.evaluate.observable`) is what a robot *could* see.
+Two different things keep a part of it out of the dense cloud: no photo (or one) of the
+campaign saw it, which is the capture's loss, or enough photos saw it and multi-view stereo
+found no depth there, which is the dense stage's (plain paint, a ceiling seen at a grazing
+angle). :func:`photo_view_counts` counts, per surface sample, the campaign's photos that see
+it (true pose, in the frame, not occluded: a depth test against the true scene rendered at
+low resolution); :func:`completeness_breakdown` splits the completeness by that count and by
+the surface's material, with each material's texture contrast (the standard deviation of its
+texture's grey levels: what photometric stereo has to work with).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+#: resolution of the depth maps of the visibility test (px); a sample is seen when its depth
+#: agrees with the rendered one within max(DEPTH_TOL_M, DEPTH_REL_TOL * depth)
+VIEW_SIZE = (160, 120)
+DEPTH_TOL_M = 0.03
+DEPTH_REL_TOL = 0.02
+#: the view-count classes of the breakdown
+VIEW_CLASSES = ((0, 0, "0"), (1, 1, "1"), (2, None, ">=2"))
+
+
+def photo_view_counts(
+    points: np.ndarray,
+    poses: Sequence[tuple[np.ndarray, np.ndarray]],
+    scene,
+    hfov_deg: float,
+    size: tuple[int, int] = VIEW_SIZE,
+) -> np.ndarray:
+    """Per surface sample, the number of photos that see it.
+
+    Args:
+        points: (M, 3) surface samples (world, m).
+        poses: (R_cam_from_world, centre) per photo
+            (:func:`scenebot.evaluate.metrics.true_photo_poses`).
+        scene: the true :class:`~scenebot.scene.mesh.SceneMesh`.
+        hfov_deg: the photos' horizontal field of view (deg).
+        size: (width, height) of the depth maps of the visibility test.
+
+    Returns:
+        (M,) int32 counts.
+    """
+    from scenebot.sim.renderer import Intrinsics, Renderer
+
+    points = np.asarray(points, np.float64)
+    w, h = size
+    intr = Intrinsics.from_hfov(w, h, hfov_deg)
+    renderer = Renderer(scene, noise_sigma=0.0, antialias=False)
+    counts = np.zeros(len(points), np.int32)
+    for R, c in poses:
+        _, depth = renderer.render(intr, R, c, return_depth=True)
+        X = (points - c) @ R.T
+        front = np.flatnonzero(X[:, 2] > 0.05)
+        z = X[front, 2]
+        u = intr.fx * X[front, 0] / z + intr.cx
+        v = intr.fy * X[front, 1] / z + intr.cy
+        ui, vi = np.round(u).astype(np.int64), np.round(v).astype(np.int64)
+        inside = (ui >= 0) & (ui < w) & (vi >= 0) & (vi < h)
+        d = depth[vi[inside], ui[inside]]
+        zi = z[inside]
+        seen = np.abs(d - zi) < np.maximum(DEPTH_TOL_M, DEPTH_REL_TOL * zi)
+        counts[front[inside][seen]] += 1
+    return counts
+
+
+def texture_contrast(texture: np.ndarray) -> float:
+    """Standard deviation of a texture's grey levels (0-255)."""
+    t = np.asarray(texture, np.float64)
+    grey = t[..., :3] @ np.array([0.299, 0.587, 0.114]) if t.ndim == 3 else t
+    return float(grey.std())
+
+
+def completeness_breakdown(
+    distances: np.ndarray,
+    weights: np.ndarray,
+    views: np.ndarray,
+    material_ids: np.ndarray,
+    materials: Sequence,
+    thresholds_m: Sequence[float] = (0.01, 0.02, 0.05),
+) -> dict:
+    """Completeness of the observable surface split by photo count and by material.
+
+    Args:
+        distances: (M,) distance of each observable sample to the nearest cloud point (m).
+        weights: (M,) the samples' areas (m^2).
+        views: (M,) photos that see each sample (:func:`photo_view_counts`).
+        material_ids: (M,) material index of each sample's triangle.
+        materials: the scene's materials (``name``, ``texture``).
+        thresholds_m: distances (m).
+
+    Returns:
+        ``photographed_share`` (area seen by >= 2 photos), ``by_views`` (per class: area
+        share and completeness per threshold) and ``by_material`` (per material, largest
+        area first: area share, photographed share, texture contrast, completeness).
+    """
+    d = np.asarray(distances, np.float64)
+    w = np.asarray(weights, np.float64)
+    views = np.asarray(views)
+    total = float(w.sum())
+
+    def comp(mask: np.ndarray) -> dict[str, float | None]:
+        a = float(w[mask].sum())
+        return {
+            f"{round(t * 100, 1):g}cm": (float(w[mask & (d < t)].sum()) / a if a > 0 else None)
+            for t in thresholds_m
+        }
+
+    by_views = []
+    for lo, hi, label in VIEW_CLASSES:
+        m = (views >= lo) & (views <= hi if hi is not None else True)
+        by_views.append({"views": label, "area_share": float(w[m].sum()) / total,
+                         "completeness": comp(m)})  # fmt: skip
+    by_material = []
+    mids = np.asarray(material_ids)
+    for mi in np.unique(mids):
+        m = mids == mi
+        area = float(w[m].sum())
+        by_material.append(
+            {
+                "material": materials[mi].name,
+                "area_share": area / total,
+                "photographed_share": float(w[m & (views >= 2)].sum()) / area if area else 0.0,
+                "texture_contrast": texture_contrast(materials[mi].texture),
+                "completeness": comp(m),
+            }
+        )
+    by_material.sort(key=lambda r: -r["area_share"])
+    photographed = views >= 2
+    return {
+        "photographed_share": float(w[photographed].sum()) / total,
+        "completeness_where_photographed": comp(photographed),
+        "by_views": by_views,
+        "by_material": by_material,
+        "view_test": {
+            "size": list(VIEW_SIZE),
+            "depth_tol_m": DEPTH_TOL_M,
+            "depth_rel_tol": DEPTH_REL_TOL,
+        },
+    }
