@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenebot.dense.planefill import backproject, detect_planes, fill_view
+from scenebot.dense.planefill import (
+    backproject,
+    detect_planes,
+    fill_view,
+    plane_evidence,
+    validate_planes,
+)
 
 W, H, F = 160, 120, 100.0
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
@@ -80,3 +86,64 @@ def test_depth_behind_a_plane_is_culled_and_replaced():
     assert np.allclose(fd[60:63, 80:83], 3.0, atol=1e-3)
     keep, _, _, culled = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), cull_behind=False)
     assert culled == 0 and np.all(keep[60:63, 80:83] == 5.0)
+
+
+def test_phantom_planes_are_dropped_and_the_real_wall_kept():
+    """A wall at 3 m seen in three maps; in one of them a transient mismatch at 2 m (a plane
+    floating in the room, seen through in the other maps); in all of them an aliased patch at
+    4 m interleaved with the wall (a phantom behind the wall, as a repeating carpet makes one
+    beneath the floor)."""
+    transient, steady = wall(), wall()
+    transient[20:50, 20:50] = 2.0
+    for d in (transient, steady):
+        d[70:100, 100:130][::2, ::2] = 4.0
+        d[70:100, 100:130][1::2, 1::2] = 4.0
+    maps = (transient, steady, steady.copy())
+    pts = np.concatenate([backproject(d, K, R, T)[d > 0] for d in maps])
+    planes = detect_planes(pts, distance_m=0.01, min_share=0.005, cell_m=0.1)
+    depths = sorted(round(-p.offset / p.normal[2], 2) for p in planes)
+    assert depths == [2.0, 3.0, 4.0]
+    on = np.zeros(3, np.int64)
+    behind = np.zeros(3, np.int64)
+    hidden = np.zeros((3, 3), np.int64)
+    for d in maps:
+        a, b, c = plane_evidence(d, K, R, T, planes, stride=2)
+        on, behind, hidden = on + a, behind + b, hidden + c
+    keep, why = validate_planes(planes, on, behind, hidden, max_seen_through=1.0, max_hidden=0.5)
+    depth_of = {j: round(-p.offset / p.normal[2], 2) for j, p in enumerate(planes)}
+    assert [depth_of[j] for j in keep] == [3.0]
+    assert {depth_of[j]: w.split(":")[0] for j, w in why.items()} == {
+        2.0: "seen through",
+        4.0: "hidden",
+    }
+    # the evidence itself: all that lies behind the wall is the phantom at 4 m
+    wall_j = keep[0]
+    far = next(j for j in depth_of if depth_of[j] == 4.0)
+    assert hidden[far, wall_j] > 0.9 * on[far]
+    assert behind[wall_j] == hidden[far, wall_j] < 0.1 * on[wall_j]
+
+
+def test_oriented_ransac_finds_the_steps_not_the_slope_across_them():
+    """Six 10 cm steps: by position alone the slope through their edges holds more points
+    than any one tread; with the stereo normals only treads and risers are planes."""
+    rng = np.random.default_rng(2)
+    pts, nrm = [], []
+    for i in range(6):
+        tread = np.c_[rng.uniform(i * 0.1, (i + 1) * 0.1, 800), rng.uniform(0, 1, 800)]
+        pts.append(np.c_[tread[:, 0], tread[:, 1], np.full(800, (i + 1) * 0.1)])
+        nrm.append(np.tile([0.0, 0.0, 1.0], (800, 1)))
+        riser = np.c_[rng.uniform(0, 1, 800), rng.uniform(i * 0.1, (i + 1) * 0.1, 800)]
+        pts.append(np.c_[np.full(800, i * 0.1), riser[:, 0], riser[:, 1]])
+        nrm.append(np.tile([-1.0, 0.0, 0.0], (800, 1)))
+    pts = np.concatenate(pts) + rng.normal(0, 0.002, (9600, 3))
+    nrm = np.concatenate(nrm) + rng.normal(0, 0.1, (9600, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    kw = dict(distance_m=0.015, min_share=0.05, cell_m=0.05)
+    slope = 0.0
+    for p in detect_planes(pts, **kw):
+        slope = max(slope, min(abs(p.normal[0]), abs(p.normal[2])))
+    assert slope > 0.5  # by position alone, a plane at about 45 degrees
+    planes = detect_planes(pts, normals=nrm, normal_deg=30, **kw)
+    assert len(planes) == 12
+    for p in planes:  # every one a tread or a riser
+        assert max(abs(p.normal[0]), abs(p.normal[2])) > np.cos(np.radians(2))

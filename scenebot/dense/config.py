@@ -88,6 +88,16 @@ class PlaneFillConfig(BaseModel):
         20000, ge=100, description="Measured points drawn per view for the plane search."
     )
     ransac_distance_m: float = Field(0.015, gt=0, description="RANSAC inlier distance (m).")
+    normal_deg: float | None = Field(
+        30.0,
+        gt=0,
+        le=90,
+        description=(
+            "A point supports a plane only where its stereo normal lies within this angle "
+            "(degrees) of the plane's (oriented RANSAC); null: positions only (open3d "
+            "segment_plane), which lets planes cut across several surfaces."
+        ),
+    )
     merge_angle_deg: float = Field(
         5.0, gt=0, description="Planes closer than this (and 2 RANSAC distances) are one."
     )
@@ -105,7 +115,13 @@ class PlaneFillConfig(BaseModel):
         3, ge=1, description="Inliers a raster cell needs to belong to the plane's extent."
     )
     extent_close_cells: int = Field(
-        2, ge=0, description="Morphological closing (cells) of the extent: bridges small gaps."
+        6,
+        ge=0,
+        description=(
+            "Morphological closing (cells) of the extent: bridges gaps up to about twice "
+            "this many cells (plain paint between textured patches). Wide extents need "
+            "dense.plane_fill.drop_phantoms, or phantom planes remove real depth."
+        ),
     )
     label_distance_m: float = Field(
         0.02, gt=0, description="A measured pixel lies on a plane within this distance (m) ..."
@@ -128,6 +144,30 @@ class PlaneFillConfig(BaseModel):
     )
     extent_margin_m: float = Field(
         0.05, ge=0, description="Filled points may lie this far (m) outside the plane's extent."
+    )
+    drop_phantoms: bool = Field(
+        True,
+        description=(
+            "Check every plane against the measured depth of a sample of views and drop "
+            "phantoms (dense.plane_fill.max_seen_through, max_hidden)."
+        ),
+    )
+    max_seen_through: float = Field(
+        1.0,
+        gt=0,
+        description=(
+            "Drop a plane when more measured points lie behind its extent than this multiple "
+            "of those on it (a phantom plane floating in the room is seen through)."
+        ),
+    )
+    max_hidden: float = Field(
+        0.5,
+        gt=0,
+        description=(
+            "Then drop a plane when more than this share of its points lie behind another "
+            "kept plane (a phantom plane beneath the floor, from matches on a repeating "
+            "carpet)."
+        ),
     )
     cull_behind: bool = Field(
         True,

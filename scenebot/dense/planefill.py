@@ -7,9 +7,13 @@ lies on the plane that spans it (a poster on the wall, the wall's edges, the pat
 carpet). This step, between depth estimation and fusion:
 
 1. **Planes**: every view's measured (filtered) depth is back-projected and thinned to a
-   voxel grid; planes are peeled off the cloud by RANSAC (open3d ``segment_plane``), largest
+   voxel grid with its stereo normals; planes are peeled off the cloud by oriented RANSAC
+   (a point supports a plane only where its normal agrees within ``normal_deg``), largest
    first, while one still holds ``min_plane_share`` of the points. Each plane keeps its
-   extent: the cells of an in-plane raster that hold inliers, closed over small gaps.
+   extent: the cells of an in-plane raster that hold inliers, closed over gaps. Planes that
+   the measured depth of a sample of views contradicts are dropped (``drop_phantoms``):
+   those seen through (more measured depth behind their extent than on it) and those that
+   lie behind another plane (a slice beneath the floor from a repeating carpet).
 2. **Labels**: a measured pixel carries the label of the plane it lies on (within
    ``distance_m`` or ``rel_distance`` of its depth), or "off-plane".
 3. **Votes**: on a grid of ``cell_px`` cells, every cell without measured depth looks along 8
@@ -115,6 +119,42 @@ def _fit_plane(x: np.ndarray) -> tuple[np.ndarray, float]:
     return n, float(-n @ c)
 
 
+def _ransac_point_normal(
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    distance_m: float,
+    cos_normal: float,
+    rng: np.random.Generator,
+    hypotheses: int = 512,
+    score_points: int = 20000,
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """The plane through one point along its normal that most other points agree with.
+
+    A point agrees when it lies within ``distance_m`` of the plane and its own normal is
+    within ``arccos(cos_normal)`` of the plane's. Hypotheses come from single oriented
+    points (Schnabel et al.'s oriented RANSAC); the best is refitted by least squares twice.
+
+    Returns:
+        The unit normal, offset and the (N,) inlier mask over ``pts``.
+    """
+    n_pts = len(pts)
+    hyp = rng.choice(n_pts, min(hypotheses, n_pts), replace=False)
+    sub = rng.choice(n_pts, min(score_points, n_pts), replace=False)
+    hn = nrm[hyp]
+    hd = -np.einsum("ij,ij->i", hn, pts[hyp])
+    agree = (np.abs(pts[sub] @ hn.T + hd) < distance_m) & (np.abs(nrm[sub] @ hn.T) > cos_normal)
+    best = int(agree.sum(0).argmax())
+    n, d = hn[best], float(hd[best])
+    on = np.zeros(n_pts, bool)
+    for _ in range(2):
+        on = (np.abs(pts @ n + d) < distance_m) & (np.abs(nrm @ n) > cos_normal)
+        if on.sum() < 3:
+            break
+        n, d = _fit_plane(pts[on])
+    on = (np.abs(pts @ n + d) < distance_m) & (np.abs(nrm @ n) > cos_normal)
+    return n, d, on
+
+
 def detect_planes(
     points: np.ndarray,
     distance_m: float = 0.015,
@@ -125,13 +165,19 @@ def detect_planes(
     min_cell_points: int = 3,
     close_cells: int = 2,
     merge_angle_deg: float = 5.0,
+    normals: np.ndarray | None = None,
+    normal_deg: float = 30.0,
 ) -> list[Plane]:
     """Peel planes off a cloud by RANSAC, largest first.
 
-    Each RANSAC plane is refitted by least squares to its inliers (and takes the points
-    within ``distance_m`` of the refit); a plane within ``merge_angle_deg`` and
-    ``2 * distance_m`` of one already found (a noisy floor peeled in slices) is merged into
-    it.
+    Without ``normals``, open3d's ``segment_plane`` proposes each plane; with them (the
+    stereo's per-pixel normals), oriented RANSAC (:func:`_ransac_point_normal`) does, and a
+    point belongs to a plane only where its normal agrees within ``normal_deg``: a phantom
+    plane that cuts across several surfaces (a diagonal through box corners, a slice beneath
+    the floor) finds no support. Each plane is refitted by least squares to its inliers (and
+    takes the points within ``distance_m`` of the refit); a plane within
+    ``merge_angle_deg`` and ``2 * distance_m`` of one already found (a noisy floor peeled in
+    slices) is merged into it.
 
     Args:
         points: (N, 3) points (m).
@@ -141,6 +187,8 @@ def detect_planes(
         seed: RANSAC seed.
         cell_m, min_cell_points, close_cells: the extent raster (:func:`plane_extent`).
         merge_angle_deg: planes closer in angle (and offset) are one.
+        normals: (N, 3) unit normals of the points, or None.
+        normal_deg: largest angle between a point's normal and its plane's.
 
     Returns:
         The planes with their extents, largest first.
@@ -148,7 +196,10 @@ def detect_planes(
     import open3d as o3d
 
     o3d.utility.random.seed(seed)
+    rng = np.random.default_rng(seed)
     rest = np.asarray(points, np.float64)
+    rest_n = None if normals is None else np.asarray(normals, np.float64)
+    cos_normal = np.cos(np.radians(normal_deg))
     n_all = len(rest)
     found: list[list[np.ndarray]] = []  # inlier sets
     fits: list[tuple[np.ndarray, float]] = []
@@ -156,14 +207,19 @@ def detect_planes(
     for _ in range(4 * max_planes):
         if len(fits) >= max_planes or len(rest) < max(3, min_share * n_all):
             break
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
-        _, idx = pcd.segment_plane(distance_m, 3, 500)
-        if len(idx) < max(3, min_share * n_all):
-            break
-        n, d = _fit_plane(rest[idx])
-        on = np.abs(rest @ n + d) < distance_m
-        if on.sum() < 3:
-            on[idx] = True
+        if rest_n is None:
+            pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
+            _, idx = pcd.segment_plane(distance_m, 3, 500)
+            if len(idx) < max(3, min_share * n_all):
+                break
+            n, d = _fit_plane(rest[idx])
+            on = np.abs(rest @ n + d) < distance_m
+            if on.sum() < 3:
+                on[idx] = True
+        else:
+            n, d, on = _ransac_point_normal(rest, rest_n, distance_m, cos_normal, rng)
+            if on.sum() < max(3, min_share * n_all):
+                break
         inl = rest[on]
         c = inl.mean(0)
         for k, (nk, dk) in enumerate(fits):
@@ -175,6 +231,8 @@ def detect_planes(
             found.append([inl])
             fits.append((n, d))
         rest = rest[~on]
+        if rest_n is not None:
+            rest_n = rest_n[~on]
     planes: list[Plane] = []
     for sets, (n, d) in zip(found, fits, strict=True):
         inl = np.concatenate(sets)
@@ -217,6 +275,69 @@ def _nearest_labels(cell_label: np.ndarray, measured: np.ndarray, max_steps: int
             out[k].flat[sel] = cell_label[rr[hit], cc[hit]]
             found.flat[sel] = True
     return out
+
+
+def plane_evidence(
+    depth: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    planes: list[Plane],
+    distance_m: float = 0.02,
+    rel_distance: float = 0.01,
+    stride: int = 4,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What one view's measured depth (every ``stride``-th pixel) says about the planes.
+
+    Returns:
+        ``on`` (P,): measured points on each plane; ``behind`` (P,): measured points behind
+        each plane's extent along their ray (a phantom plane floating in the room is seen
+        through); ``hidden`` (P, P): points on plane j behind plane k's extent (a phantom
+        plane beneath the floor lies behind the floor).
+    """
+    d = depth[::stride, ::stride]
+    vv, uu = np.mgrid[0 : depth.shape[0] : stride, 0 : depth.shape[1] : stride]
+    m = d > 0
+    z_meas = d[m].astype(np.float64)
+    ray = np.stack([(uu[m] + 0.5 - K[0, 2]) / K[0, 0], (vv[m] + 0.5 - K[1, 2]) / K[1, 1],
+                    np.ones(m.sum())], -1) @ R  # fmt: skip
+    centre = -R.T @ t
+    n = len(planes)
+    X = centre + z_meas[:, None] * ray
+    tol = np.maximum(distance_m, rel_distance * z_meas)
+    on = np.zeros((n, len(z_meas)), bool)
+    back = np.zeros((n, len(z_meas)), bool)
+    for j, pl in enumerate(planes):
+        on[j] = np.abs(X @ pl.normal + pl.offset) < tol
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = -(centre @ pl.normal + pl.offset) / (ray @ pl.normal)
+        cand = np.isfinite(z) & (z > 0) & (z < z_meas * (1 - rel_distance) - 2 * distance_m)
+        if cand.any():
+            cand[cand] = pl.inside(centre + z[cand, None] * ray[cand])
+        back[j] = cand
+    hidden = on.astype(np.int64) @ back.T.astype(np.int64)
+    np.fill_diagonal(hidden, 0)
+    return on.sum(1), back.sum(1), hidden
+
+
+def validate_planes(
+    planes: list[Plane], on: np.ndarray, behind: np.ndarray, hidden: np.ndarray,
+    max_seen_through: float, max_hidden: float,
+) -> tuple[list[int], dict[int, str]]:  # fmt: skip
+    """Planes kept (indices) and why the others were dropped: first those seen through
+    (``behind > max_seen_through * on``), then, among the rest, those whose points mostly
+    lie behind another kept plane (``hidden > max_hidden * on``)."""
+    why: dict[int, str] = {}
+    for j in range(len(planes)):
+        if behind[j] > max_seen_through * max(on[j], 1):
+            why[j] = f"seen through: {behind[j]} measured points behind it, {on[j]} on it"
+    kept = [j for j in range(len(planes)) if j not in why]
+    for j in list(kept):
+        others = [k for k in kept if k != j]
+        worst = max((hidden[j, k] for k in others), default=0)
+        if worst > max_hidden * max(on[j], 1):
+            why[j] = f"hidden: {worst} of its {on[j]} points lie behind another plane"
+    return [j for j in kept if j not in why], why
 
 
 def fill_view(
@@ -380,22 +501,45 @@ def plane_fill(
 
     # the planes, from every view's measured depth thinned to a voxel grid
     rng = np.random.default_rng(cfg.seed)
-    pts = []
+    pts, nrms = [], []
     for name, K, R, t, _ in views:
-        d, _ = measured(name)
-        X = backproject(d, K, R, t)[d > 0]
+        d, nm = measured(name)
+        ok = (d > 0) & (np.linalg.norm(nm, axis=-1) > 0.5)
+        X, N = backproject(d, K, R, t)[ok], nm[ok].astype(np.float64) @ R  # world normals
         if len(X) > cfg.points_per_view:
-            X = X[rng.choice(len(X), cfg.points_per_view, replace=False)]
+            pick = rng.choice(len(X), cfg.points_per_view, replace=False)
+            X, N = X[pick], N[pick]
         pts.append(X)
+        nrms.append(N / np.linalg.norm(N, axis=1, keepdims=True))
     cloud = np.concatenate(pts) if pts else np.zeros((0, 3))
+    cloud_n = np.concatenate(nrms) if nrms else np.zeros((0, 3))
     if len(cloud):
         keys = np.floor(cloud / cfg.voxel_m).astype(np.int64)
         _, first = np.unique(keys, axis=0, return_index=True)
-        cloud = cloud[first]
+        cloud, cloud_n = cloud[first], cloud_n[first]
     planes = detect_planes(
         cloud, cfg.ransac_distance_m, cfg.min_plane_share, cfg.max_planes, cfg.seed,
         cfg.extent_cell_m, cfg.extent_min_points, cfg.extent_close_cells, cfg.merge_angle_deg,
+        normals=cloud_n if cfg.normal_deg is not None else None,
+        normal_deg=cfg.normal_deg or 90.0,
     )  # fmt: skip
+    dropped: dict[int, str] = {}
+    if cfg.drop_phantoms and planes:
+        on = np.zeros(len(planes), np.int64)
+        behind = np.zeros(len(planes), np.int64)
+        hidden = np.zeros((len(planes), len(planes)), np.int64)
+        for name, K, R, t, _ in views[:: max(1, len(views) // 40)]:
+            a, b, c = plane_evidence(measured(name)[0], K, R, t, planes, cfg.label_distance_m,
+                                     cfg.label_rel_distance)  # fmt: skip
+            on, behind, hidden = on + a, behind + b, hidden + c
+        keep, dropped = validate_planes(planes, on, behind, hidden, cfg.max_seen_through,
+                                        cfg.max_hidden)  # fmt: skip
+        for j, why in dropped.items():
+            LOG.info("dense: plane %d (normal %s) dropped, %s", j,
+                     np.round(planes[j].normal, 2).tolist(), why)  # fmt: skip
+        dropped = {j: f"normal {np.round(planes[j].normal, 3).tolist()}, offset "
+                   f"{planes[j].offset:.3f}: {w}" for j, w in dropped.items()}  # fmt: skip
+        planes = [planes[j] for j in keep]
     LOG.info("dense: %d planes in %d voxel points", len(planes), len(cloud))
     per_view = []
     total_px = total_measured = total_filled = total_culled = 0
@@ -424,6 +568,7 @@ def plane_fill(
     return {
         "planes": planes_out,
         "voxel_points": len(cloud),
+        "planes_dropped": list(dropped.values()),
         "measured_fraction": total_measured / max(total_px, 1),
         "filled_fraction": total_filled / max(total_px, 1),
         "culled_fraction": total_culled / max(total_px, 1),
