@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -32,6 +33,19 @@ def snakemake(workdir: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, capture_output=True, text=True, cwd=workdir, timeout=900)
 
 
+def why(res: subprocess.CompletedProcess, workdir: Path) -> str:
+    """What a failed run said: the end of its stderr, then the end of each failed rule's log
+    (Snakemake's own message of a failed rule is mostly its shell command, and a long one
+    pushes the rule's error out of the stderr's tail)."""
+    logs = re.findall(r"log: (\S+) \(check log file", res.stderr)
+    text = [res.stderr[-2000:]]
+    for name in dict.fromkeys(logs):
+        path = workdir / name
+        tail = path.read_text(errors="replace")[-3000:] if path.is_file() else "(missing)"
+        text.append(f"--- {name} ---\n{tail}")
+    return "\n".join(text)
+
+
 @pytest.fixture
 def workdir(tmp_path):
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(SMALL))
@@ -41,7 +55,7 @@ def workdir(tmp_path):
 @pytest.mark.slow
 def test_workflow_runs_then_has_nothing_to_do_then_reruns_what_changed(workdir):
     first = snakemake(workdir, *CAPTURE)
-    assert first.returncode == 0, first.stderr[-3000:]
+    assert first.returncode == 0, why(first, workdir)
     capture = workdir / "results/office/round_000/capture"
     assert len(list((capture / "images").glob("*.jpg"))) == 12
     assert (capture / "trajectory.png").is_file()
@@ -59,7 +73,7 @@ def test_workflow_runs_then_has_nothing_to_do_then_reruns_what_changed(workdir):
     assert "capture_round0" in out and "Params have changed" in out
 
     rerun = snakemake(workdir, *CAPTURE)
-    assert rerun.returncode == 0, rerun.stderr[-3000:]
+    assert rerun.returncode == 0, why(rerun, workdir)
     superseded = list((capture / "superseded").glob("*/images/*.jpg"))
     assert len(superseded) == 12  # the first photos were kept
 
@@ -90,7 +104,7 @@ def test_round0_capture_through_the_nxt_driver_and_the_brick_emulator(workdir):
     cfg["nxt_emulator"] = {"time_scale": 4.0}
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     res = snakemake(workdir, f"{'results/office/round_000/capture/log.jsonl'}")
-    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.returncode == 0, why(res, workdir)
     capture = workdir / "results/office/round_000/capture"
     records = [json.loads(line) for line in (capture / "log.jsonl").read_text().splitlines()]
     assert records[0]["robot"] == "nxt-emulated"
@@ -140,9 +154,9 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
 
         plot_trajectory(capture / "log.jsonl", trajectory)
     touched = snakemake(workdir, "--touch", *CAPTURE)
-    assert touched.returncode == 0, touched.stderr[-3000:]
+    assert touched.returncode == 0, why(touched, workdir)
     res = snakemake(workdir)
-    assert res.returncode == 0, res.stderr[-4000:]
+    assert res.returncode == 0, why(res, workdir)
     assert not (capture / "superseded").exists()  # the given photos were not re-taken
     results = workdir / "results/office"
     r0 = results / "round_000"
@@ -217,7 +231,7 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
     photos = {p: p.stat().st_mtime_ns for p in results.glob("round_*/capture/images/*.jpg")}
     (workdir / "config.yaml").write_text(yaml.safe_dump(dict(cfg, score={"n_candidates": 250})))
     again = snakemake(workdir)
-    assert again.returncode == 0, again.stderr[-4000:]
+    assert again.returncode == 0, why(again, workdir)
     assert "rule score" in again.stdout + again.stderr
     assert "capture" not in "".join(
         line for line in (again.stdout + again.stderr).splitlines() if line.startswith("rule ")
@@ -239,7 +253,7 @@ def test_bring_your_own_photos_make_round_0(workdir):
     cfg["sfm"] = {"peak_threshold": 0.002, "exhaustive_max_images": 60}  # no odometry: all pairs
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     res = snakemake(workdir, "results/office/round_000/sfm/map.png")
-    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.returncode == 0, why(res, workdir)
     report = json.loads((workdir / "results/office/round_000/sfm/report.json").read_text())
     assert report["registered"] >= 0.8 * report["photos"]
     assert not (workdir / "results/office/round_000/capture").exists()  # no robot ran

@@ -5,9 +5,9 @@ over its pixels of the smallest angle between the candidate's ray and a photo's 
 same surface point -- predicts how poorly an image synthesized there would turn out, so the
 robot should go where it is high. This module tests the claim directly (simulated scenes):
 
-1. ``M`` candidates are drawn at random (seeded) from round ``r``'s scored candidates
-   (``round_{r}/candidates.csv``: the very poses and scores the goals stage chose from),
-   keeping those whose render hits the map's mesh on enough pixels to have a score.
+1. Round ``r``'s scored candidates (``round_{r}/candidates.csv``: the very poses and scores
+   the goals stage chose from) whose render hits the map's mesh on enough pixels to have a
+   score are taken in a random (seeded) order until ``M`` of them have a true view (step 4).
 2. Each candidate is synthesized by unstructured lumigraph rendering (:mod:`scenebot.tour`)
    from round ``r``'s photos at their round-``r`` poses. The geometric proxy is the campaign's
    dense cloud, brought into round ``r``'s frame by the similarity between the two maps'
@@ -139,7 +139,8 @@ def _candidate_pose(x: float, y: float, theta: float) -> tuple[np.ndarray, np.nd
 
 
 def pick_candidates(cands: dict, m: int, min_hit: float, seed: int) -> np.ndarray:
-    """Indices of ``m`` random scored candidates that hit the mesh on ``min_hit`` of pixels."""
+    """Indices of ``m`` random scored candidates that hit the mesh on ``min_hit`` of pixels,
+    in the (seeded) order they were drawn."""
     ok = np.isfinite(cands["score_deg"]) & (cands["hit_fraction"] >= min_hit)
     idx = np.flatnonzero(ok)
     if len(idx) < 3:
@@ -148,7 +149,7 @@ def pick_candidates(cands: dict, m: int, min_hit: float, seed: int) -> np.ndarra
             "for a correlation (raise score.n_candidates)"
         )
     rng = np.random.default_rng(seed)
-    return np.sort(rng.choice(idx, size=min(m, len(idx)), replace=False))
+    return rng.choice(idx, size=min(m, len(idx)), replace=False)
 
 
 def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | None = None,
@@ -194,7 +195,9 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
     if not cand_csv.is_file():
         raise EvaluationError(f"{cand_csv} not found: run the score stage of {rdir.name} first")
     cands = read_candidates(cand_csv)
-    pick = pick_candidates(cands, ecfg.validity_candidates, cfg.goals.min_hit_fraction, ecfg.seed)
+    # every usable candidate in a seeded random order; the first M with a true view are kept
+    order = pick_candidates(cands, len(cands["score_deg"]), cfg.goals.min_hit_fraction, ecfg.seed)
+    m = ecfg.validity_candidates
 
     # the renderer: round r's photos, the dense cloud moved into round r's frame
     init_taichi(cfg.tour.taichi_arch, cfg.tour.num_threads)
@@ -220,10 +223,12 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
     cam = Camera.pinhole(w, h, cam_cfg.hfov_deg)
 
     rows, excluded = [], []
-    for i in tqdm(pick, desc="score validity", unit="view", disable=not progress):
+    bar = tqdm(total=min(m, len(order)), desc="score validity", unit="view", disable=not progress)
+    for i in order:
+        if len(rows) >= m:
+            break
         x, y, th = (float(cands[k][i]) for k in ("x", "y", "theta"))
         Rc, tc = _candidate_pose(x, y, th)
-        res = ulr.render(cam, Rc, tc)
         c_robot = -Rc.T @ tc
         c_world = to_world.apply(c_robot[None])[0]
         R_world = Rc @ to_world.R.T
@@ -236,6 +241,8 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
             excluded.append({"index": int(i), "true_hit_fraction": float(hit.mean()),
                              "true_median_depth_m": near})  # fmt: skip
             continue
+        res = ulr.render(cam, Rc, tc)
+        bar.update()
         rows.append(
             {
                 "index": int(i),
@@ -250,10 +257,11 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
                 "ssim": ssim(res.image, true),
             }
         )
+    bar.close()
     if len(rows) < 3:
         open_view = sum(e["true_hit_fraction"] < MIN_TRUE_HIT for e in excluded)
         raise EvaluationError(
-            f"only {len(rows)} of {len(pick)} candidates of {rdir.name} have a true view: "
+            f"only {len(rows)} of {len(order)} usable candidates of {rdir.name} have a true view: "
             f"{open_view} look mostly past the true scene (< {MIN_TRUE_HIT:.0%} of pixels on "
             f"it), {len(excluded) - open_view} stand against or inside it (median true depth "
             f"< {MIN_TRUE_DEPTH_M} m); too few for a correlation. The map of {rdir.name} "
@@ -268,6 +276,7 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
         "round": rdir.name,
         "candidates": len(rows),
         "candidates_scored": int(np.isfinite(cands["score_deg"]).sum()),
+        "candidates_examined": len(rows) + len(excluded),
         "spearman_score_psnr": rho,
         "spearman_95ci": [lo, hi],
         "spearman_score_ssim": spearman(score, [r["ssim"] for r in rows]),
