@@ -22,7 +22,7 @@ rule campaign:
         "../envs/scenebot.yaml"
     params:
         py=PY,
-        cfg=stage_params("goals"),
+        cfg=stage_params("goals", "max_rounds"),
         rounds=lambda w: ",".join(str(r) for r in campaign_rounds()),
         scene_dir=lambda w, output: Path(output.summary).parent,
     shell:

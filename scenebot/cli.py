@@ -127,7 +127,8 @@ def cmd_campaign(args) -> int:
 
     cfg = _config(args)
     rounds = [int(r) for r in args.rounds.split(",")]
-    summary = write(Path(args.scene_dir), rounds, cfg.max_rounds, Path(args.out))
+    limit = 1 if cfg.robot == "photos" else cfg.max_rounds  # as the workflow's campaign_rounds
+    summary = write(Path(args.scene_dir), rounds, limit, Path(args.out))
     print(json.dumps({k: summary[k] for k in ("photos_total", "stopped_because")}))
     return 0
 
