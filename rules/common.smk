@@ -95,8 +95,7 @@ def campaign_rounds():
     """The rounds the campaign runs: 0, then one more while the last round's decisions (the
     plan checkpoint, after goals.json) say the map is incomplete, up to max_rounds."""
     rounds = [0]
-    limit = 1 if PHOTOS else CFG.max_rounds
-    while len(rounds) < limit:
+    while len(rounds) < CFG.round_limit():
         r = f"{rounds[-1]:03d}"
         checkpoints.plan.get(r=r)
         goals = Path(f"{RESULTS}/round_{r}/goals.json")

@@ -127,8 +127,7 @@ def cmd_campaign(args) -> int:
 
     cfg = _config(args)
     rounds = [int(r) for r in args.rounds.split(",")]
-    limit = 1 if cfg.robot == "photos" else cfg.max_rounds  # as the workflow's campaign_rounds
-    summary = write(Path(args.scene_dir), rounds, limit, Path(args.out))
+    summary = write(Path(args.scene_dir), rounds, cfg.round_limit(), Path(args.out))
     print(json.dumps({k: summary[k] for k in ("photos_total", "stopped_because")}))
     return 0
 

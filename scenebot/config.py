@@ -386,6 +386,11 @@ class Config(_Model):
             object.__setattr__(self, "sfm", sfm)
         return self
 
+    def round_limit(self) -> int:
+        """Rounds the campaign runs at most: ``max_rounds``, or 1 for ``robot: photos``
+        (a folder of photos is round 0, and no robot can take more)."""
+        return 1 if self.robot == "photos" else self.max_rounds
+
     def camera_mount(self) -> tuple[float, float]:
         """The camera centre (forward, left) of the robot's rotation axis (m)."""
         return self.sim.camera.forward_offset_m, self.sim.camera.lateral_offset_m

@@ -42,6 +42,9 @@ def test_camera_mount_is_configured_once_and_follow_inherits_it():
     )
     assert own.follow.camera_forward_m == 0.05  # an explicit value is kept
     assert Config().max_rounds == 3
+    assert Config(max_rounds=2).round_limit() == 2
+    photos = Config.model_validate({"robot": "photos", "photos": {"folder": "x"}, "max_rounds": 3})
+    assert photos.round_limit() == 1  # a folder of photos is round 0; no robot takes more
 
 
 def _grid():
