@@ -134,6 +134,13 @@ def previous_round(wildcards):
     return [f"{RESULTS}/round_{prev}/capture/log.jsonl"]
 
 
+def previous_goals(wildcards):
+    """Round r-1's goals.json (none for round 0): the goals stage compares the rounds' mean
+    view scores (goals.min_score_gain, diminishing returns)."""
+    r = int(wildcards.r)
+    return [f"{RESULTS}/round_{r - 1:03d}/goals.json"] if r > 0 else []
+
+
 def captures_until(wildcards):
     """The capture logs of rounds 0..r (the map of round r uses all of them)."""
     r = int(wildcards.r)

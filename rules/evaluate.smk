@@ -144,7 +144,9 @@ rule validity:
 
 # `snakemake --cores 2 baselines` (on demand: two more campaigns): random exploration only
 # and the frontier chooser at the campaign's photo budget, each a full campaign in
-# results/{scene}/baselines/<name>/, compared by dense completeness against the truth.
+# results/{scene}/baselines/<name>/, compared by coverage per photo count and dense
+# completeness against the truth (`python -m scenebot baselines --replot-only` redraws
+# them from the campaigns already run).
 rule baselines:
     input:
         code=stage_code("evaluate"),

@@ -111,6 +111,7 @@ rule goals:
         model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
         candidates=f"{RESULTS}/round_{{r}}/candidates.csv",
         freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
+        previous=previous_goals,
     output:
         goals=f"{RESULTS}/round_{{r}}/goals.json",
         picture=report(

@@ -236,9 +236,12 @@ def visit_goals(
             res = go(goal, None, k)
         if not res.reached:
             continue
+        asked = path["robot_goal"] if not extra else None
         event("goal_reached", k, goal, reason="reached", estimate=res.pose.as_dict(),
               distance_m=res.distance_m, localized_at_goal=res.localized_at_goal,
-              robot_goal=path["robot_goal"] if not extra else None, **extra)  # fmt: skip
+              confirmed_at_goal=res.confirmed_at_goal, robot_goal=asked,
+              driven_goal=None if res.goal_xy is None else list(res.goal_xy),
+              **extra)  # fmt: skip
         outcomes.append({"goal_index": k, "status": "reached", "reason": "reached", **extra})
         n_photos += shoot(goal, k, n_photos)
     return outcomes, n_photos

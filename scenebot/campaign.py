@@ -56,8 +56,11 @@ def _round_evaluation(records: list[dict], prev_accuracy: dict | None, reach_m: 
             continue
         rob = tr.get("robot", tr)
         true_map = to_map([rob["x"], rob["y"], z])[:2]
-        if r.get("event") == "goal_reached" and r.get("robot_goal") is not None:
-            target = np.asarray(r["robot_goal"], float)
+        # the goal where the robot drove (``driven_goal``: the one asked for, or where the
+        # planner moved it off an obstacle cell)
+        target = r.get("driven_goal") or r.get("robot_goal")
+        if r.get("event") == "goal_reached" and target is not None:
+            target = np.asarray(target, float)
             goal_err.append(float(np.hypot(*(true_map - target))))
         if r.get("event") == "localize" and "localization" in r:
             c = r["localization"]["center"]

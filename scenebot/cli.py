@@ -74,11 +74,21 @@ def cmd_score(args) -> int:
     return 0
 
 
+def previous_round_dir(round_dir: Path) -> Path | None:
+    """``round_{r-1}`` beside ``round_{r}``; None for round 0 or a folder not so named."""
+    name = Path(round_dir).name
+    if not name.startswith("round_") or not name[6:].isdigit() or int(name[6:]) == 0:
+        return None
+    return Path(round_dir).parent / f"round_{int(name[6:]) - 1:03d}"
+
+
 def cmd_goals(args) -> int:
     from scenebot.score.stage import GoalsInputs, GoalsOutputs, run_goals
 
     cfg, r = _config(args), Path(args.round_dir)
-    inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz", r / "sfm")
+    prev = previous_round_dir(r)
+    inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz", r / "sfm",
+                         None if prev is None else prev / "goals.json")  # fmt: skip
     print(json.dumps(run_goals(cfg.goals, inputs, GoalsOutputs(r / "goals.json", r / "goals.png"))))
     return 0
 

@@ -210,6 +210,14 @@ class FollowConfig(_Model):
         description="Failed localizations at the goal before accepting odometry (with "
         "retry_turn_deg 40, eight retries look all around).",
     )
+    confirm_m: float = Field(
+        0.06,
+        ge=0,
+        description="A goal counts as reached on a fix only when a second fix from the same "
+        "spot (after a turn in place: another view of the map) agrees with it within this "
+        "distance (m); without one within max_localize_retries attempts the goal is accepted "
+        "and reported unconfirmed. 0: one fix is enough.",
+    )
     retry_turn_deg: float = Field(
         40.0,
         ge=0,
@@ -331,10 +339,12 @@ class Config(_Model):
     )
     seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
     max_rounds: int = Field(
-        3,
+        5,
         ge=1,
         description="Capture rounds at most: round 0 (exploration) and max_rounds - 1 "
-        "adaptive rounds; the campaign stops earlier when a round's goals.json says complete.",
+        "adaptive rounds; the campaign stops earlier when a round's goals.json says complete "
+        "(goals.complete_threshold_deg, goals.min_score_gain). A safety cap: 100 round-0 "
+        "photos and 25 a round stay within 200.",
     )
     world: WorldConfig = WorldConfig()
     sim: SimConfig = SimConfig()

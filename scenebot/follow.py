@@ -12,7 +12,12 @@ localize (too few matches or inliers, or a pose that is not that of a level came
 robot) leaves the odometry estimate in charge; the next motion is followed by another attempt,
 and at the goal the robot turns in place to look elsewhere before retrying. A fix that jumps
 far from the odometry prediction (repeated textures can give confident wrong poses) is
-rejected unless the next fix agrees with it (``gate_m``, ``gate_deg``).
+rejected unless the next fix agrees with it (``gate_m``, ``gate_deg``). A goal counts as
+reached only on a *confirmed* fix: a second fix, taken from the same spot after a turn in place
+(a different view of the map), must agree with the first within ``confirm_m``. One wrong fix in
+a poorly textured corner then cannot end the approach ``goal_reached_m`` off; when no second
+fix comes within ``max_localize_retries`` attempts the goal is accepted as it stands and
+reported unconfirmed (``confirmed_at_goal``).
 
 Everything runs against :class:`scenebot.robot.base.Robot` and :class:`Camera`; localization
 and planning are injected callables, so the same code runs on the simulator and on hardware.
@@ -79,6 +84,9 @@ class FollowResult:
         obstacles: bumps/stalls met.
         localizations: successful visual fixes; ``failed_localizations``: failed ones.
         localized_at_goal: the final pose comes from a fix taken at the goal.
+        confirmed_at_goal: and a second fix from the same spot agreed with it (``confirm_m``).
+        goal_xy: the robot position driven to (m, map frame): the requested goal, or where
+            the planner moved it off an obstacle cell.
         motions: motion commands issued.
         replans: paths planned after obstacles.
     """
@@ -91,6 +99,8 @@ class FollowResult:
     localizations: int = 0
     failed_localizations: int = 0
     localized_at_goal: bool = False
+    confirmed_at_goal: bool = False
+    goal_xy: tuple[float, float] | None = None
     motions: int = 0
     replans: int = 0
     events: list = field(default_factory=list)
@@ -105,6 +115,8 @@ class FollowResult:
             "localizations": self.localizations,
             "failed_localizations": self.failed_localizations,
             "localized_at_goal": self.localized_at_goal,
+            "confirmed_at_goal": self.confirmed_at_goal,
+            "goal_xy": None if self.goal_xy is None else list(self.goal_xy),
             "motions": self.motions,
             "replans": self.replans,
         }
@@ -170,6 +182,7 @@ class PathFollower:
         self._since_fix_m = 0.0 if initial_pose is not None and trust_initial else math.inf
         self._photo_count = 0
         self._rejected: tuple[Pose2D, Pose2D] | None = None  # (fix, odometry) last rejected
+        self._fixes_here: list[Pose2D] = []  # fixes since the robot last drove
         self._goal_index = 0
         self._result: FollowResult | None = None
 
@@ -271,6 +284,7 @@ class PathFollower:
                 return self._reject(path, FailureReason.INCONSISTENT_WITH_ODOMETRY, cand, est)
             self._rejected = None
             self._set_fix(cand, odo)
+            self._fixes_here.append(cand)
             self._since_fix_m = 0.0
             if res is not None:
                 res.localizations += 1
@@ -320,6 +334,20 @@ class PathFollower:
             return close(cand, compose_odometry(prev, prev_odo, odo), cfg.gate_m)
         return False
 
+    def _confirmed_here(self) -> bool:
+        """Whether the last fix is confirmed: an earlier fix since the robot last drove (only
+        turns in place between them, which leave the rotation axis where it was) puts the
+        robot within ``confirm_m`` of it. ``confirm_m`` 0: any fix is confirmed."""
+        if self.cfg.confirm_m <= 0:
+            return bool(self._fixes_here)
+        if len(self._fixes_here) < 2:
+            return False
+        last = self._fixes_here[-1]
+        return any(
+            math.hypot(f.x - last.x, f.y - last.y) <= self.cfg.confirm_m
+            for f in self._fixes_here[:-1]
+        )
+
     def _motion(self, kind: str, amount: float) -> MotionResult:
         res = self._result
         if res is not None:
@@ -330,6 +358,7 @@ class PathFollower:
         self._dead_reckon(r.angle_rad if kind == "turn" else 0.0)
         if kind == "drive":
             self._since_fix_m += abs(r.distance_m)
+            self._fixes_here.clear()
         if r.status is MotionStatus.LINK_LOST:
             raise _GiveUp("link to the robot lost during a motion")
         return r
@@ -408,19 +437,20 @@ class PathFollower:
                     self._event("target_node", node=target, xy=path[target].tolist())
                 d_goal = float(np.hypot(*(goal - here)))
                 if target == len(path) - 1 and d_goal < cfg.goal_reached_m:
-                    if self._since_fix_m == 0.0:
-                        break  # confirmed by a fix taken here
-                    est = self.localize_now()
-                    if est.ok:
-                        continue  # re-check with the fix
-                    retries += 1
+                    if self._since_fix_m == 0.0 and self._confirmed_here():
+                        break  # two fixes taken here agree
                     if retries > cfg.max_localize_retries:
-                        break  # accept odometry, reported by localized_at_goal = False
-                    if cfg.retry_turn_deg > 0:  # look elsewhere: sweep around in small turns
-                        self._motion("turn", math.radians(cfg.retry_turn_deg))
-                    else:
-                        self._motion("drive", -cfg.retry_move_m)
-                    continue
+                        break  # accept it, reported by localized/confirmed_at_goal
+                    if retries > 0 or self._since_fix_m == 0.0:
+                        # look elsewhere first: after a failed fix, or for a second opinion
+                        # on a fix taken here (a different view of the map)
+                        if cfg.retry_turn_deg > 0:  # sweep around in small turns
+                            self._motion("turn", math.radians(cfg.retry_turn_deg))
+                        else:
+                            self._motion("drive", -cfg.retry_move_m)
+                    retries += 1
+                    self.localize_now()
+                    continue  # re-check with the fix (or the odometry)
                 tgt = path[target]
                 turn = wrap_angle(math.atan2(tgt[1] - here[1], tgt[0] - here[0]) - p.theta)
                 if abs(math.degrees(turn)) > cfg.min_turn_deg:
@@ -444,6 +474,7 @@ class PathFollower:
             res.reached = True
             res.reason = "reached"
             res.localized_at_goal = self._since_fix_m == 0.0
+            res.confirmed_at_goal = res.localized_at_goal and self._confirmed_here()
             if goal_theta is not None and cfg.turn_to_goal_heading:
                 for _ in range(3):  # turn, check the heading with a fix, correct the slip
                     turn = wrap_angle(goal_theta - self.pose.theta)
@@ -456,6 +487,7 @@ class PathFollower:
             res.reason = g.reason
         p = self.pose
         res.pose = p
+        res.goal_xy = (float(goal[0]), float(goal[1]))
         res.distance_m = float(np.hypot(goal[0] - p.x, goal[1] - p.y))
         self._event(
             "follow_end",

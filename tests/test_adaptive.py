@@ -41,7 +41,7 @@ def test_camera_mount_is_configured_once_and_follow_inherits_it():
         {"sim": {"camera": {"forward_offset_m": 0.2}}, "follow": {"camera_forward_m": 0.05}}
     )
     assert own.follow.camera_forward_m == 0.05  # an explicit value is kept
-    assert Config().max_rounds == 3
+    assert Config().max_rounds == 5
     assert Config(max_rounds=2).round_limit() == 2
     photos = Config.model_validate({"robot": "photos", "photos": {"folder": "x"}, "max_rounds": 3})
     assert photos.round_limit() == 1  # a folder of photos is round 0; no robot takes more
@@ -245,7 +245,8 @@ def test_an_abandoned_goal_is_replaced_by_the_next_unused_backup():
         ok = g["candidate"] not in unreachable
         return SimpleNamespace(reached=ok, reason="reached" if ok else "5 obstacles met",
                                obstacles=0 if ok else 5, pose=Pose2D(g["x"], 0.0, 0.0),
-                               distance_m=0.01, localized_at_goal=True)  # fmt: skip
+                               distance_m=0.01, localized_at_goal=True,
+                               confirmed_at_goal=True, goal_xy=(g["x"], 0.0))  # fmt: skip
 
     def event(name, k, g, **fields):
         events.append((name, k, g["candidate"], fields.get("backup_for")))

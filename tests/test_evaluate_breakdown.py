@@ -1,5 +1,5 @@
-"""Where completeness is lost: photo view counts (visibility against the true scene) and the
-breakdown by view count and material (evaluation only)."""
+"""Where completeness is lost: photo view counts (visibility against the true scene), the
+breakdown by view count and material, and the coverage curve by photo count (evaluation only)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,10 @@ from conftest import box_room
 
 from scenebot.evaluate.breakdown import (
     completeness_breakdown,
+    count_views,
+    coverage_by_photo_count,
     photo_view_counts,
+    photo_visibility,
     texture_contrast,
 )
 from scenebot.evaluate.observable import sample_surface_weighted
@@ -20,6 +23,8 @@ BOX = ((1.0, 1.0, 0.0), (1.6, 1.6, 0.5))
 # a camera at (3.5, 1.3) at 0.35 m looking west (-x): OpenCV axes right = +y, down = -z
 LOOK_WEST = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])
 CENTRE = np.array([3.5, 1.3, 0.35])
+# from the same centre looking east (+x): right = -y, down = -z
+LOOK_EAST = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 
 @pytest.fixture(scope="module")
@@ -72,3 +77,49 @@ def test_breakdown_splits_the_area_by_views_and_material():
     assert poster["completeness"]["2cm"] == pytest.approx(2 / 3)
     assert paint["texture_contrast"] == 0.0 < 50 < poster["texture_contrast"]
     assert texture_contrast(np.zeros((2, 2))) == 0.0
+
+
+def test_coverage_by_photo_count_accumulates_the_photos_in_order():
+    # 5 samples (areas 1, 2, 3, 4, 10), 5 photos; every 2 photos and the last
+    w = np.array([1.0, 2.0, 3.0, 4.0, 10.0])
+    vis = [np.array([0, 1]), np.array([1, 2]), np.array([], int), np.array([0, 3]), np.array([4])]
+    cov = coverage_by_photo_count(iter(vis), w, step=2)  # read once: a generator will do
+    assert cov["photos"] == [2, 4, 5]
+    # after 2 photos: counts 1, 2, 1, 0, 0; after 4: 2, 2, 1, 1, 0; after 5: 2, 2, 1, 1, 1
+    assert cov["seen_1"] == pytest.approx([6 / 20, 10 / 20, 1.0])
+    assert cov["seen_2"] == pytest.approx([2 / 20, 3 / 20, 3 / 20])
+    np.testing.assert_array_equal(count_views(vis, 5), [2, 2, 1, 1, 1])
+    # unit weights: shares of the samples; a step dividing N ends on N once
+    cov = coverage_by_photo_count(vis[:4], np.ones(5), step=1)
+    assert cov["photos"] == [1, 2, 3, 4]
+    assert cov["seen_1"] == pytest.approx([0.4, 0.6, 0.6, 0.8])
+    assert cov["seen_2"] == pytest.approx([0.0, 0.2, 0.2, 0.4])
+    assert coverage_by_photo_count([], w) == {"photos": [], "seen_1": [], "seen_2": []}
+    with pytest.raises(ValueError, match="step"):
+        coverage_by_photo_count(vis, w, step=0)
+
+
+def test_coverage_curve_of_rendered_photos_ends_on_the_view_counts(samples):
+    scene, pts, w, _ = samples
+    # west twice (the second adds no new surface but sees it all twice), then east: disjoint
+    poses = [(LOOK_WEST, CENTRE), (LOOK_WEST, CENTRE), (LOOK_EAST, CENTRE)]
+    vis = list(photo_visibility(pts, poses, scene, hfov_deg=60.0))
+    assert [v.dtype for v in vis] == [np.int32] * 3
+    np.testing.assert_array_equal(vis[0], vis[1])
+    assert len(vis[2]) > 50 and not np.intersect1d(vis[0], vis[2]).size
+    assert np.all(pts[vis[2], 0] > 3.5)  # the east photo sees only what lies east of it
+    views = photo_view_counts(pts, poses, scene, hfov_deg=60.0)
+    np.testing.assert_array_equal(count_views(vis, len(pts)), views)
+    cov = coverage_by_photo_count(vis, w, step=1)
+    west, east = w[vis[0]].sum() / w.sum(), w[vis[2]].sum() / w.sum()
+    assert cov["photos"] == [1, 2, 3]
+    assert cov["seen_1"] == pytest.approx([west, west, west + east])
+    assert cov["seen_2"] == pytest.approx([0.0, west, west])
+    assert 0.05 < west < 0.5 and east > 0.002  # the east wall is 0.5 m away
+    # the last point is the breakdown's photographed share over all photos
+    b = completeness_breakdown(np.zeros(len(pts)), w, views, np.zeros(len(pts), int),
+                               scene.materials)  # fmt: skip
+    assert cov["seen_2"][-1] == b["photographed_share"]
+    assert cov["seen_1"][-1] == pytest.approx(w[views >= 1].sum() / w.sum())
+    # every 2 photos: n = 2 and N = 3
+    assert coverage_by_photo_count(vis, w, step=2)["photos"] == [2, 3]

@@ -166,6 +166,27 @@ def test_goal_truth_counts_reachable_goals_and_true_stopping_distances(tmp_path)
     assert gt["reached_within_fraction_of_reachable"] == pytest.approx(1 / 3)
 
 
+def test_goal_truth_measures_a_moved_goal_where_the_robot_drove(tmp_path):
+    """A goal the planner moved off an obstacle cell (``driven_goal``) is measured there; the
+    distance to the position first asked for is reported beside it."""
+    cap, sfm = write_round(tmp_path)
+    sim = robot_to_world(sfm, [cap])
+    asked, driven = np.array([3.0, 2.0]), np.array([3.0, 2.13])  # world
+    stop = driven + np.array([0.03, 0.0])
+    with CaptureLog(tmp_path / "r1.jsonl") as log:
+        log.write({"type": "event", "event": "goal_reached", "goal_index": 0,
+                   "robot_goal": to_robot([*asked, 0.35])[:2].tolist(),
+                   "driven_goal": to_robot([*driven, 0.35])[:2].tolist(),
+                   "truth": {"x": float(stop[0]), "y": float(stop[1]), "theta": 0.0}})  # fmt: skip
+    gt = goal_truth([cap, tmp_path / "r1.jsonl"], sim, lambda xy: xy[1] > 2.05)
+    g = gt["goals"][0]
+    assert g["reachable"] is True  # judged where the robot was sent
+    assert g["true_distance_m"] == pytest.approx(0.03, abs=1e-3)
+    assert g["true_distance_to_asked_m"] == pytest.approx(np.hypot(0.03, 0.13), abs=1e-3)
+    assert g["moved_m"] == pytest.approx(0.13, abs=1e-3)
+    assert gt["reached_within"] == 1 and gt["reached_within_asked"] == 0
+
+
 def test_the_stage_writes_the_round_evaluation(tmp_path, scene, surf):
     cap, sfm = write_round(tmp_path, goals=["goal_reached", "goal_abandoned"])
     # the true observable surface in the robot frame, with half of it missing
@@ -196,6 +217,12 @@ def test_the_stage_writes_the_round_evaluation(tmp_path, scene, surf):
     assert {m["material"] for m in b["by_material"]} <= {"carpet", "poster", "cardboard"}
     unseen = next(c for c in b["by_views"] if c["views"] == "0")
     assert unseen["area_share"] > 0.0
+    # the coverage curve: every 5 photos and the last, ending on the breakdown's share
+    cov = ev["coverage_by_photos"]
+    assert cov["photos"] == [5, 8]
+    assert cov["seen_2"][-1] == b["photographed_share"]
+    assert all(s2 <= s1 for s1, s2 in zip(cov["seen_1"], cov["seen_2"], strict=True))
+    assert cov["seen_1"][0] <= cov["seen_1"][1] and cov["seen_2"][0] <= cov["seen_2"][1]
     saved = json.loads(outs.json.read_text())
     assert saved["dense"]["points"] == int(keep.sum())
     assert outs.png.stat().st_size > 20_000 and obs.is_file()

@@ -75,6 +75,8 @@ def test_baseline_configs_keep_the_campaign_and_change_only_the_method():
     assert rnd["max_rounds"] == 1 and rnd["exploration"]["photos"] == 140
     fr = baseline_config(campaign, "frontier", 140)
     assert fr["goals"] == {"k": 5, "method": "frontier"} and fr["max_rounds"] == 3
+    # the adaptive campaign stopped by itself after 2 rounds: the frontier one runs as many
+    assert baseline_config(campaign, "frontier", 140, rounds=2)["max_rounds"] == 2
     assert campaign["goals"] == {"k": 5}  # the campaign's own config is not touched
     for cfg in (rnd, fr):
         assert cfg["evaluate"]["validity_candidates"] == 0

@@ -29,11 +29,14 @@ CAM_FWD = 0.1
 
 
 class KinematicRobot(Robot):
-    """A disk robot: turns slip by ``turn_slip`` (odometry does not see it); boxes bump it."""
+    """A disk robot: turns slip by ``turn_slip`` and drives fall short by ``drive_short``
+    (odometry sees neither); boxes bump it."""
 
-    def __init__(self, pose, turn_slip=0.08, boxes=(), radius=0.15, odo_theta0=1.0):
+    def __init__(self, pose, turn_slip=0.08, boxes=(), radius=0.15, odo_theta0=1.0,
+                 drive_short=0.0):  # fmt: skip
         self.true = np.array(pose, float)
         self.turn_slip = turn_slip
+        self.drive_short = drive_short
         self.boxes = [np.array(b, float) for b in boxes]  # (x0, y0, x1, y1)
         self.radius = radius
         self.t = 0.0
@@ -55,7 +58,8 @@ class KinematicRobot(Robot):
         status, bumper = MotionStatus.COMPLETED, None
         while abs(done) < abs(distance_m) - 1e-12:
             s = step if abs(distance_m - done) > abs(step) else distance_m - done
-            nxt = self.true[:2] + s * np.array([math.cos(self.true[2]), math.sin(self.true[2])])
+            ds = s * (1.0 - self.drive_short)
+            nxt = self.true[:2] + ds * np.array([math.cos(self.true[2]), math.sin(self.true[2])])
             if self._clearance(nxt) < self.radius:
                 status, bumper = MotionStatus.BUMPED, "front" if distance_m > 0 else "rear"
                 break
@@ -402,3 +406,41 @@ def test_mirrored_fixes_are_rejected_by_the_compass_even_when_they_agree(tmp_pat
         assert res.reached and math.hypot(robot.true[0] - 1.5, robot.true[1] - 1.5) < 0.15
     else:  # without the compass the agreeing mirrored fixes take over
         assert not by_compass and len(accepted) > 2
+
+
+class GlitchAtGoalLocalizer(OracleLocalizer):
+    """The first fix within ``radius`` of ``goal`` says the robot stands exactly there (one
+    confident wrong pose, as in a poorly textured corner); every other fix is right."""
+
+    def __init__(self, robot, goal, radius=0.15):
+        super().__init__(robot, sigma_m=0.003, sigma_deg=0.2)
+        self.goal, self.radius, self.glitched = np.asarray(goal, float), radius, False
+
+    def __call__(self, path):
+        est = super().__call__(path)
+        x, y, th = self.robot.true
+        if not self.glitched and math.hypot(x - self.goal[0], y - self.goal[1]) < self.radius:
+            self.glitched = True
+            c = np.r_[self.goal + CAM_FWD * np.array([math.cos(th), math.sin(th)]), 0.0]
+            return PoseEstimate(est.R, -est.R @ c, 520.0, 800, 300, 250, 0.8, "oracle")
+        return est
+
+
+@pytest.mark.parametrize("confirm_m", [0.0, 0.06])
+def test_a_goal_is_reached_only_on_a_fix_a_second_view_confirms(tmp_path, confirm_m):
+    """Drives fall 25 % short, so the robot arrives 12 cm before the goal, where one wrong fix
+    says it is there. A second view (after a turn in place) must agree before the goal counts
+    as reached (``confirm_m``); without the check that one fix ends the approach."""
+    goal = (1.5, 0.0)
+    robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.0, drive_short=0.25)
+    loc = GlitchAtGoalLocalizer(robot, goal)
+    cfg = FollowConfig(camera_forward_m=CAM_FWD, confirm_m=confirm_m)
+    f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid()), cfg, tmp_path)
+    res = f.follow(np.array([[0.0, 0.0], goal]))
+    true_off = math.hypot(robot.true[0] - goal[0], robot.true[1] - goal[1])
+    assert loc.glitched and res.reached and res.localized_at_goal
+    assert res.goal_xy == pytest.approx(goal)
+    if confirm_m > 0:
+        assert res.confirmed_at_goal and true_off < 0.06
+    else:
+        assert true_off > 0.08  # the wrong fix ended it

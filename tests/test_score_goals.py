@@ -172,3 +172,38 @@ def test_goals_keep_enough_photographed_surface_to_register(scored_room, tmp_pat
         assert doc["best_score_any_deg"] >= doc["best_score_deg"]
     assert np.all(seen[0.4] >= 0.4)
     assert seen[0.0].min() < 0.4  # the paper's goals include views that show almost nothing known
+
+
+@pytest.mark.parametrize(
+    ("previous_mean", "complete"),
+    [(None, False), (1.5, False), (1.05, True)],  # x the round's own mean score
+)
+def test_a_round_that_buys_too_little_completes_exploration(
+    scored_room, tmp_path, previous_mean, complete
+):
+    """goals.min_score_gain: when the mean view score fell by less than that fraction since
+    the previous round, the map is complete (diminishing returns), with the reason; round 0
+    (no previous goals.json) never completes this way."""
+    mean = scored_room["doc"]["mean_score_deg"]
+    assert 0 < mean <= 180
+    prev = None
+    if previous_mean is not None:
+        prev = tmp_path / "round_000" / "goals.json"
+        prev.parent.mkdir()
+        prev.write_text(json.dumps({"mean_score_deg": previous_mean * mean}))
+    doc = run_goals(
+        GoalsConfig(k=6, min_score_gain=0.15),
+        GoalsInputs(
+            scored_room["so"].candidates_csv,
+            scored_room["mo"].freespace_npz,
+            previous_goals_json=prev,
+        ),
+        GoalsOutputs(tmp_path / "round_001" / "goals.json"),
+    )
+    assert doc["complete"] is complete
+    if previous_mean is None:
+        assert doc["score_gain"] is None
+    else:
+        assert doc["score_gain"]["gain"] == pytest.approx(1 - 1 / previous_mean, abs=1e-3)
+    assert ("diminishing returns" in doc.get("complete_because", "")) is complete
+    assert doc["goals"]  # the goals are still listed, for information

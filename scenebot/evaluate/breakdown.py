@@ -10,11 +10,15 @@ it (true pose, in the frame, not occluded: a depth test against the true scene r
 low resolution); :func:`completeness_breakdown` splits the completeness by that count and by
 the surface's material, with each material's texture contrast (the standard deviation of its
 texture's grey levels: what photometric stereo has to work with).
+
+:func:`coverage_by_photo_count` follows the same visibility photo by photo, in capture order:
+the share of the observable surface that the first n photos see once and twice, n = 5, 10,
+..., N (the capture's coverage curve; the baselines compare campaigns by it).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -25,16 +29,22 @@ DEPTH_TOL_M = 0.03
 DEPTH_REL_TOL = 0.02
 #: the view-count classes of the breakdown
 VIEW_CLASSES = ((0, 0, "0"), (1, 1, "1"), (2, None, ">=2"))
+#: photo counts of the coverage curve: every COVERAGE_STEP photos (and the last)
+COVERAGE_STEP = 5
 
 
-def photo_view_counts(
+def photo_visibility(
     points: np.ndarray,
     poses: Sequence[tuple[np.ndarray, np.ndarray]],
     scene,
     hfov_deg: float,
     size: tuple[int, int] = VIEW_SIZE,
-) -> np.ndarray:
-    """Per surface sample, the number of photos that see it.
+) -> Iterator[np.ndarray]:
+    """Per photo, in the order of ``poses``, the surface samples it sees.
+
+    A sample is seen when it lies in front of the camera, projects into the frame and its
+    depth agrees with the true scene's depth map there (within max(DEPTH_TOL_M,
+    DEPTH_REL_TOL * depth)): one render at ``size`` per photo.
 
     Args:
         points: (M, 3) surface samples (world, m).
@@ -44,8 +54,8 @@ def photo_view_counts(
         hfov_deg: the photos' horizontal field of view (deg).
         size: (width, height) of the depth maps of the visibility test.
 
-    Returns:
-        (M,) int32 counts.
+    Yields:
+        Per photo, the (K,) increasing int32 indices into ``points`` of the samples it sees.
     """
     from scenebot.sim.renderer import Intrinsics, Renderer
 
@@ -53,7 +63,6 @@ def photo_view_counts(
     w, h = size
     intr = Intrinsics.from_hfov(w, h, hfov_deg)
     renderer = Renderer(scene, noise_sigma=0.0, antialias=False)
-    counts = np.zeros(len(points), np.int32)
     for R, c in poses:
         _, depth = renderer.render(intr, R, c, return_depth=True)
         X = (points - c) @ R.T
@@ -66,8 +75,82 @@ def photo_view_counts(
         d = depth[vi[inside], ui[inside]]
         zi = z[inside]
         seen = np.abs(d - zi) < np.maximum(DEPTH_TOL_M, DEPTH_REL_TOL * zi)
-        counts[front[inside][seen]] += 1
+        yield front[inside][seen].astype(np.int32)
+
+
+def count_views(visibility: Iterable[np.ndarray], n_samples: int) -> np.ndarray:
+    """(n_samples,) int32: how many of the photos of ``visibility`` see each sample
+    (:func:`photo_visibility`'s output)."""
+    counts = np.zeros(n_samples, np.int32)
+    for idx in visibility:
+        counts[idx] += 1  # a photo's indices are distinct
     return counts
+
+
+def photo_view_counts(
+    points: np.ndarray,
+    poses: Sequence[tuple[np.ndarray, np.ndarray]],
+    scene,
+    hfov_deg: float,
+    size: tuple[int, int] = VIEW_SIZE,
+) -> np.ndarray:
+    """Per surface sample, the number of photos that see it (:func:`photo_visibility`).
+
+    Args:
+        points: (M, 3) surface samples (world, m).
+        poses: (R_cam_from_world, centre) per photo
+            (:func:`scenebot.evaluate.metrics.true_photo_poses`).
+        scene: the true :class:`~scenebot.scene.mesh.SceneMesh`.
+        hfov_deg: the photos' horizontal field of view (deg).
+        size: (width, height) of the depth maps of the visibility test.
+
+    Returns:
+        (M,) int32 counts.
+    """
+    vis = photo_visibility(points, poses, scene, hfov_deg, size)
+    return count_views(vis, len(points))
+
+
+def coverage_by_photo_count(
+    visibility: Iterable[np.ndarray],
+    weights: np.ndarray,
+    step: int = COVERAGE_STEP,
+) -> dict[str, list]:
+    """The capture's coverage curve: the share of the surface seen by >= 1 and by >= 2 of
+    the first n photos, for n = step, 2 step, ..., N (and N itself).
+
+    Args:
+        visibility: per photo, in capture order (round 0's photos, then round 1's, ...), the
+            indices of the samples it sees (:func:`photo_visibility`); read once.
+        weights: (M,) the samples' areas (m^2): the shares are of the area, as
+            :func:`completeness_breakdown`'s ``photographed_share`` (which the last
+            ``seen_2`` equals); ones give shares of the samples.
+        step: photos between two points of the curve.
+
+    Returns:
+        ``photos`` (the n), ``seen_1`` and ``seen_2`` (shares in [0, 1], one per n); all
+        empty without photos.
+    """
+    if step < 1:
+        raise ValueError(f"coverage step must be >= 1 photo, got {step}")
+    w = np.asarray(weights, np.float64)
+    total = float(w.sum())
+    counts = np.zeros(len(w), np.int32)
+    out: dict[str, list] = {"photos": [], "seen_1": [], "seen_2": []}
+
+    def record(n: int) -> None:
+        out["photos"].append(n)
+        for k in (1, 2):
+            out[f"seen_{k}"].append(float(w[counts >= k].sum()) / total if total > 0 else 0.0)
+
+    n = 0
+    for n, idx in enumerate(visibility, start=1):
+        counts[idx] += 1
+        if n % step == 0:
+            record(n)
+    if n and (not out["photos"] or out["photos"][-1] != n):
+        record(n)
+    return out
 
 
 def texture_contrast(texture: np.ndarray) -> float:

@@ -10,6 +10,8 @@ Examples::
         --out results/office/eval/observable_surface.npz
     python -m scenebot.evaluate evaluate --config config.yaml --scene-dir results/office \\
         --round 0 --dense results/office/final/dense/fused.ply
+    python -m scenebot.evaluate baselines --replot-only --config config.yaml \\
+        --scene-dir results/office --out results/office/baselines/baselines.json
 """
 
 from __future__ import annotations
@@ -111,17 +113,34 @@ def cmd_validity(args) -> int:
 
 
 def cmd_baselines(args) -> int:
-    from scenebot.evaluate.baselines import run_baselines
+    import yaml
 
-    campaign = json.loads(args.campaign)
+    from scenebot.evaluate.baselines import refresh_baselines, run_baselines
+
+    if args.campaign:
+        campaign = json.loads(args.campaign)
+    else:
+        path = Path(args.config)
+        if not path.is_file():
+            raise FileNotFoundError(f"campaign config {path} not found (or give --campaign)")
+        campaign = yaml.safe_load(path.read_text()) or {}
     methods = tuple(m for m in args.methods.split(",") if m)
-    s = run_baselines(campaign, Path(args.scene_dir), Path(args.out), methods, args.cores)
+    if args.replot_only:
+        s = refresh_baselines(campaign, Path(args.scene_dir), Path(args.out), methods)
+    else:
+        s = run_baselines(campaign, Path(args.scene_dir), Path(args.out), methods, args.cores)
     for name, v in s.items():
         if isinstance(v, dict) and v.get("dense"):
             d = v["dense"].get("2cm", {})
             print(f"{name}: {v['photos']} photos, completeness at 2 cm "
                   f"{100 * d.get('completeness', float('nan')):.1f}%, accuracy "
                   f"{100 * d.get('accuracy', float('nan')):.1f}%")  # fmt: skip
+            cov = v.get("coverage_by_photos") or {}
+            pts = zip(cov.get("photos", []), cov.get("seen_2", []), strict=True)
+            at = [f"{n}: {100 * c:.1f}" for n, c in pts if n % 25 == 0 or n == cov["photos"][-1]]
+            if at:
+                print("  % of the observable area seen by >= 2 photos after n photos: "
+                      + ", ".join(at))  # fmt: skip
     return 0
 
 
@@ -149,7 +168,13 @@ def add_parsers(sub) -> None:
     v.add_argument("--out", required=True, help="score_validity.json (the PNG goes beside it)")
     v.set_defaults(func=cmd_validity)
     b = sub.add_parser("baselines", help="random and frontier campaigns at the same budget")
-    b.add_argument("--campaign", required=True, help="the campaign's config as JSON")
+    b.add_argument("--campaign", help="the campaign's config as JSON (used by the workflow)")
+    b.add_argument("--config", default="config.yaml", help="else: campaign config (YAML)")
+    b.add_argument(
+        "--replot-only",
+        action="store_true",
+        help="run nothing: summarize the baselines already run, redraw the plot",
+    )
     b.add_argument("--scene-dir", required=True, help="results/<scene> of the campaign")
     b.add_argument("--methods", default="random,frontier", help="comma-separated baselines")
     b.add_argument("--cores", type=int, default=2, help="cores of the nested runs")

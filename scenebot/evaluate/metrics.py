@@ -244,10 +244,13 @@ def goal_truth(captures: Sequence[Path], sim: Similarity, reachable, reach_m: fl
     """Every goal of the adaptive rounds against the truth: could the robot get there, and
     how far from it did it truly stop.
 
-    A goal is *reachable* when the robot position it asks for (``robot_goal``, map frame,
-    moved to the world by ``sim``) lies in the free space connected to the start for the
-    robot's footprint (``reachable``: world (x, y) -> bool). Goal events written before
-    abandoned and skipped goals carried ``robot_goal`` count as unknown.
+    A goal is *reachable* when the robot position the robot drove to (``driven_goal``, map
+    frame, moved to the world by ``sim``) lies in the free space connected to the start for
+    the robot's footprint (``reachable``: world (x, y) -> bool). The position driven to is the
+    one asked for (``robot_goal``) unless the planner moved it off a cell its map (or a bump)
+    marks as an obstacle; the distance to the position asked for is reported beside it
+    (``true_distance_to_asked_m``). Events without ``driven_goal`` (abandoned and skipped
+    goals, older logs) use ``robot_goal``; events with neither count as unknown.
 
     Args:
         captures: capture folders (or logs) of rounds 0..r.
@@ -257,30 +260,44 @@ def goal_truth(captures: Sequence[Path], sim: Similarity, reachable, reach_m: fl
         reach_m: a goal counts as reached when the robot truly stopped within this (m).
 
     Returns:
-        ``{"goals": [per goal: round, index, event, reachable, true_distance_m], "reachable",
-        "reached_within", "reached_within_fraction_of_reachable", "reach_m",
-        "true_distance_m"}`` (summary of the reached goals' true distances).
+        ``{"goals": [per goal: round, index, event, reachable, true_distance_m,
+        true_distance_to_asked_m, moved_m], "reachable", "reached_within",
+        "reached_within_fraction_of_reachable", "reach_m", "true_distance_m",
+        "true_distance_to_asked_m"}`` (summaries of the reached goals' true distances) and
+        ``"reached_within_asked"`` (reachable goals truly within ``reach_m`` of the position
+        asked for).
     """
     rows = []
     for r, cap in enumerate(captures):
         for rec in read_log(_log_path(cap)):
             if rec.get("type") != "event" or rec.get("event") not in GOAL_EVENTS:
                 continue
-            g = rec.get("robot_goal")
+            asked, driven = rec.get("robot_goal"), rec.get("driven_goal")
+            g = driven if driven is not None else asked
             row = {"round": r, "index": rec.get("goal_index"), "event": rec["event"],
-                   "reachable": None, "true_distance_m": None}  # fmt: skip
+                   "reachable": None, "true_distance_m": None,
+                   "true_distance_to_asked_m": None, "moved_m": None}  # fmt: skip
             if g is not None:
                 gw = sim.apply(np.array([[float(g[0]), float(g[1]), 0.0]]))[0, :2]
+                aw = gw
+                if asked is not None:
+                    aw = sim.apply(np.array([[float(asked[0]), float(asked[1]), 0.0]]))[0, :2]
+                row["moved_m"] = float(np.hypot(*(gw - aw)))
                 row["reachable"] = bool(reachable(gw))
                 tr = rec.get("truth")
                 if rec["event"] == "goal_reached" and tr is not None:
                     row["true_distance_m"] = float(math.hypot(tr["x"] - gw[0], tr["y"] - gw[1]))
+                    row["true_distance_to_asked_m"] = float(
+                        math.hypot(tr["x"] - aw[0], tr["y"] - aw[1])
+                    )
             rows.append(row)
     reach = [x for x in rows if x["reachable"]]
     within = [
         x for x in reach if x["true_distance_m"] is not None and x["true_distance_m"] <= reach_m
     ]
     dists = [x["true_distance_m"] for x in rows if x["true_distance_m"] is not None]
+    asked_d = [x["true_distance_to_asked_m"] for x in rows
+               if x["true_distance_to_asked_m"] is not None]  # fmt: skip
     return {
         "goals": rows,
         "reachable": len(reach),
@@ -289,6 +306,13 @@ def goal_truth(captures: Sequence[Path], sim: Similarity, reachable, reach_m: fl
         "reached_within_fraction_of_reachable": len(within) / len(reach) if reach else None,
         "reach_m": reach_m,
         "true_distance_m": summary_stats(np.array(dists)) if dists else None,
+        "reached_within_asked": sum(
+            1
+            for x in reach
+            if x["true_distance_to_asked_m"] is not None
+            and x["true_distance_to_asked_m"] <= reach_m
+        ),
+        "true_distance_to_asked_m": summary_stats(np.array(asked_d)) if asked_d else None,
     }
 
 

@@ -8,7 +8,8 @@ Entry points:
   and ``evaluation.png`` with photos per round, goals reached, SfM accuracy (from
   ``round_{r}/sfm/accuracy.json``), visual-localization accuracy of logged estimates, and,
   when a dense cloud is given, its accuracy and completeness at 1, 2, 5 cm against the
-  observable surface.
+  observable surface, where that completeness is lost (photographed or not, material) and
+  the capture's coverage curve (observable area seen by >= 1 and >= 2 of the first n photos).
 
 The true scene and poses are read only here; nothing a stage decides depends on them. For a
 robot without truth (``nxt``, ``photos``) only the photo and goal counts are written.
@@ -27,7 +28,12 @@ from pathlib import Path
 import numpy as np
 
 from scenebot.capturelog import json_default
-from scenebot.evaluate.breakdown import completeness_breakdown, photo_view_counts
+from scenebot.evaluate.breakdown import (
+    completeness_breakdown,
+    count_views,
+    coverage_by_photo_count,
+    photo_visibility,
+)
 from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.metrics import (
     EvaluationError,
@@ -187,7 +193,8 @@ def run(
         What ``evaluation.json`` holds: ``round``, ``capture`` (photos per round, goals),
         ``sfm`` (accuracy summary or None), ``alignment`` (robot frame -> world),
         ``localization``, ``observable`` (areas), ``dense`` (metrics per threshold or None),
-        ``notes``.
+        ``coverage_by_photos`` (with the dense cloud: ``photos``, ``seen_1``, ``seen_2``,
+        :func:`~scenebot.evaluate.breakdown.coverage_by_photo_count`, or None), ``notes``.
     """
     from scenebot.evaluate.observable import load_or_compute
 
@@ -206,6 +213,7 @@ def run(
         "goals_truth": None,
         "observable": None,
         "dense": None,
+        "coverage_by_photos": None,
         "notes": [],
     }
     truth = has_scene_truth(cfg) and stats["has_truth"]
@@ -237,9 +245,13 @@ def run(
                 surf.observable_weights, ecfg.thresholds_m, return_distances=True,
             )  # fmt: skip
             out["dense"] = {"cloud": str(inputs.dense_cloud), "points": len(cloud), **m}
-            views = photo_view_counts(
+            # one visibility render per photo, in capture order: the view counts of the
+            # breakdown and the coverage after the first n photos
+            vis = list(photo_visibility(
                 surf.observable_points, true_photo_poses(caps), sc, cfg.sim.camera.hfov_deg
-            )
+            ))  # fmt: skip
+            views = count_views(vis, len(surf.observable_points))
+            out["coverage_by_photos"] = coverage_by_photo_count(vis, surf.observable_weights)
             out["dense"]["breakdown"] = completeness_breakdown(
                 d_comp, surf.observable_weights, views,
                 sc.material_ids[surf.triangle[surf.observable]], sc.materials, ecfg.thresholds_m,

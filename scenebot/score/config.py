@@ -133,6 +133,16 @@ class GoalsConfig(BaseModel):
         ge=0.0,
         description="Exploration is complete when the best (highest) view score is below this.",
     )
+    min_score_gain: float = Field(
+        0.15,
+        ge=0.0,
+        lt=1.0,
+        description="Diminishing returns: exploration is also complete when the mean view "
+        "score over the candidates (the predicted rendering error over the free space) fell "
+        "by less than this fraction of the previous round's since that round. The best score "
+        "alone rarely falls below complete_threshold_deg: a view of never-photographed "
+        "surface (ceiling, behind furniture) keeps it high. 0: off.",
+    )
     min_seen_fraction: float = Field(
         0.4,
         ge=0.0,

@@ -7,6 +7,7 @@ outputs, so Snakemake rules and the CLI call the same code. The round's name (e.
 
 from __future__ import annotations
 
+import json
 import logging
 import re
 import time
@@ -181,6 +182,7 @@ class GoalsInputs:
     candidates_csv: Path
     freespace_npz: Path
     sfm_dir: Path | None = None  # the map (camera poses); the frontier method needs it
+    previous_goals_json: Path | None = None  # the previous round's (diminishing returns)
 
 
 @dataclass
@@ -221,6 +223,9 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     ranked = select_goals(
         poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
     )
+    scored = any_valid & np.isfinite(cols["score_deg"])
+    mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
+    returns = diminishing_returns(mean_score, inputs.previous_goals_json, cfg.min_score_gain)
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
@@ -236,8 +241,20 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
             "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
             "nms_radius_m": cfg.nms_radius_m,
             "nms_angle_deg": cfg.nms_angle_deg,
+            "mean_score_deg": None if mean_score is None else round(mean_score, 4),
+            "score_gain": returns,
         },
     )
+    if returns is not None and returns["complete"] and not doc["complete"]:
+        doc["complete"] = True
+        doc["complete_because"] = returns["reason"]
+    elif doc["complete"]:
+        doc["complete_because"] = (
+            f"best view score {doc['best_score_deg']} deg < goals.complete_threshold_deg "
+            f"= {cfg.complete_threshold_deg}"
+        )
+    if doc["complete"]:
+        log.info("%s: exploration complete: %s", where, doc["complete_because"])
     # next in rank, for the planner to use in place of a goal it cannot route to
     spare = goals_document(poses, score, backups, 0.0, where)["goals"]
     doc["backups"] = [{**g, "rank": g["rank"] + len(chosen)} for g in spare]
@@ -248,6 +265,34 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
         title = f"{where}: goals (complete={doc['complete']})"
         plot_goals(outputs.goals_png, fs, poses, score, chosen, title)
     return doc
+
+
+def diminishing_returns(
+    mean_score: float | None, previous_goals_json: Path | None, min_gain: float
+) -> dict | None:
+    """How much the last round lowered the mean view score, and whether that is too little
+    to go on (``min_gain``, a fraction of the previous round's mean).
+
+    The mean over the candidates estimates the predicted rendering error averaged over the
+    free space; its relative fall from one round to the next is what a round's photos
+    bought. None for round 0 (no previous ``goals.json``) or when a mean is missing.
+    """
+    if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
+        return None
+    prev = json.loads(previous_goals_json.read_text(encoding="utf-8")).get("mean_score_deg")
+    if not prev:
+        return None
+    gain = (prev - mean_score) / prev
+    out = {"previous_mean_score_deg": prev, "mean_score_deg": round(mean_score, 4),
+           "gain": round(gain, 4), "min_gain": min_gain,
+           "complete": bool(min_gain > 0 and gain < min_gain)}  # fmt: skip
+    if out["complete"]:
+        out["reason"] = (
+            f"diminishing returns: the mean view score fell {100 * gain:.1f}% "
+            f"({prev:.1f} -> {mean_score:.1f} deg) since the previous round, less than "
+            f"goals.min_score_gain = {100 * min_gain:.0f}%"
+        )
+    return out
 
 
 def _best(score: np.ndarray) -> float | None:
