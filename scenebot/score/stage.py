@@ -275,7 +275,10 @@ def diminishing_returns(
 
     The mean over the candidates estimates the predicted rendering error averaged over the
     free space; its relative fall from one round to the next is what a round's photos
-    bought. None for round 0 (no previous ``goals.json``) or when a mean is missing.
+    bought. A mean that *rose* is no sign of diminishing returns: the round's photos opened
+    space the map did not know (another room behind a doorway), whose views score poorly
+    until they are photographed, so exploration goes on. None for round 0 (no previous
+    ``goals.json``) or when a mean is missing.
     """
     if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
         return None
@@ -285,7 +288,7 @@ def diminishing_returns(
     gain = (prev - mean_score) / prev
     out = {"previous_mean_score_deg": prev, "mean_score_deg": round(mean_score, 4),
            "gain": round(gain, 4), "min_gain": min_gain,
-           "complete": bool(min_gain > 0 and gain < min_gain)}  # fmt: skip
+           "complete": bool(min_gain > 0 and 0 <= gain < min_gain)}  # fmt: skip
     if out["complete"]:
         out["reason"] = (
             f"diminishing returns: the mean view score fell {100 * gain:.1f}% "
