@@ -13,6 +13,7 @@ from scenebot.localize.dlt import (
     decompose_camera_matrix,
     dlt,
     dlt_batch,
+    position_std_m,
     project,
     ransac_dlt_pose,
     refine_f_r_t,
@@ -133,3 +134,26 @@ def test_matches_on_one_plane_fall_back_to_the_plane_homography():
     assert pose.inliers[~out].mean() > 0.95
     # without a known focal length a planar scene has no DLT solution
     assert ransac_dlt_pose(x, X, 320.0, 240.0, f_init=None, max_iterations=200) is None
+
+
+def test_predicted_position_error_matches_the_spread_of_noisy_refits():
+    """position_std_m: first-order error of the centre; it matches the spread of poses
+    refined from many noisy copies of the matches, grows with the image noise, and is large
+    when the matches are few and bunched far away (a poorly determined fix)."""
+    rng = np.random.default_rng(4)
+    K, R, t, X, x = _scene(rng, n=60)
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    std = position_std_m(x, X, f, cx, cy, R, t, 1.0)
+    assert std == pytest.approx(2 * position_std_m(x, X, f, cx, cy, R, t, 0.5), rel=1e-3)
+    centres = []
+    for _ in range(60):
+        xn = x + rng.normal(0, 1.0, x.shape)
+        _, Rr, tr = refine_f_r_t(xn, X, f, R, t, cx, cy, refine_focal=False)
+        centres.append((-Rr.T @ tr)[:2])
+    spread = np.sqrt(np.linalg.eigvalsh(np.cov(np.array(centres).T))[-1])
+    assert spread == pytest.approx(std, rel=0.35)
+    # 8 matches on a small patch 6 m ahead: the same noise leaves the centre far less certain
+    cam = np.c_[rng.uniform(-0.05, 0.05, (8, 2)), np.ones(8)] * 6.0
+    Xf = (cam - t) @ R
+    xf, _ = project(K @ np.c_[R, t], Xf)
+    assert position_std_m(xf, Xf, f, cx, cy, R, t, 1.0) > 20 * std

@@ -114,3 +114,19 @@ def test_pose_off_the_camera_plane_or_tilted_is_rejected(room_map):
     assert localize(img, lmap, tilted).reason is FailureReason.IMPLAUSIBLE_POSE
     unchecked = LocalizeConfig(camera_plane_z_m=None, camera_pitch_deg=None)
     assert localize(img, lmap, unchecked).ok
+
+
+def test_a_fix_whose_predicted_error_is_too_large_is_a_failure(room_map):
+    """localize.max_position_std_m: the fix says how well its matches determine the centre;
+    a bound below that makes it an ``uncertain_pose`` failure, a bound above keeps it."""
+    room, desc, cam = room_map
+    x, y, th = QUERIES[1]
+    img = room.render(camera_rotation(th), np.array([x, y, 0.0]))
+    lmap = LocalizationMap(desc, cam)
+    est = localize(img, lmap, LocalizeConfig(max_position_std_m=None))
+    assert est.ok and 0 < est.position_std_m < 0.01  # a well-determined fix (< 1 cm)
+    assert est.as_record()["position_std_m"] == est.position_std_m
+    assert localize(img, lmap, LocalizeConfig(max_position_std_m=2 * est.position_std_m)).ok
+    tight = localize(img, lmap, LocalizeConfig(max_position_std_m=0.5 * est.position_std_m))
+    assert isinstance(tight, LocalizationFailure)
+    assert tight.reason is FailureReason.UNCERTAIN_POSE

@@ -256,6 +256,60 @@ def refine_f_r_t(
     return (float(p[6]) if refine_focal else f), cv2.Rodrigues(p[:3])[0], p[3:6].copy()
 
 
+def position_std_m(
+    x: np.ndarray,
+    X: np.ndarray,
+    f: float,
+    cx: float,
+    cy: float,
+    R: np.ndarray,
+    t: np.ndarray,
+    sigma_px: float,
+) -> float:
+    """How well the inliers fix the camera centre in the plane: the 1-sigma length (m) of the
+    longer axis of the horizontal (x, y) covariance of the centre.
+
+    First-order propagation of an image noise of ``sigma_px`` through the reprojection
+    error's Jacobian in (rotation, centre) with f fixed: ``cov = sigma^2 (J^T J)^-1``. Matches
+    that are few, far, or bunched on one small patch leave the centre poorly determined along
+    some direction (a wrong fix tens of cm off can have dozens of inliers and a small RMSE);
+    this says so before the fix is used.
+
+    Args:
+        x: (n, 2) inlier pixels; X: (n, 3) their 3D points (m).
+        f, cx, cy: pinhole intrinsics (pixels).
+        R, t: the pose (cam_from_world).
+        sigma_px: image noise (pixels), e.g. the inliers' reprojection RMSE.
+
+    Returns:
+        The standard deviation (m); ``inf`` when the centre is not determined.
+    """
+    if len(x) < 4:
+        return math.inf
+    rvec0 = cv2.Rodrigues(np.asarray(R, float))[0].ravel()
+    c0 = -np.asarray(R, float).T @ np.asarray(t, float)
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        Rm = cv2.Rodrigues(p[:3])[0]
+        c = (X - p[3:6]) @ Rm.T
+        z = np.where(np.abs(c[:, 2]) < 1e-9, 1e-9, c[:, 2])
+        return np.concatenate([f * c[:, 0] / z + cx - x[:, 0], f * c[:, 1] / z + cy - x[:, 1]])
+
+    p0 = np.concatenate([rvec0, c0])
+    r0 = residuals(p0)
+    J = np.empty((len(r0), 6))
+    for k, h in enumerate((1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-5)):
+        dp = np.zeros(6)
+        dp[k] = h
+        J[:, k] = (residuals(p0 + dp) - r0) / h
+    try:
+        cov = np.linalg.inv(J.T @ J) * float(sigma_px) ** 2
+    except np.linalg.LinAlgError:
+        return math.inf
+    w = np.linalg.eigvalsh(cov[3:5, 3:5])
+    return float(np.sqrt(max(w[-1], 0.0))) if np.all(np.isfinite(w)) else math.inf
+
+
 def _sample_indices(rng: np.random.Generator, n: int, batch: int) -> np.ndarray:
     """(batch, 6) distinct random indices per row."""
     return np.argpartition(rng.random((batch, n)), MIN_SAMPLE - 1, axis=1)[:, :MIN_SAMPLE]

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenebot.localize.config import LocalizeConfig
-from scenebot.localize.dlt import ransac_dlt_pose
+from scenebot.localize.dlt import position_std_m, ransac_dlt_pose
 from scenebot.localize.features import extract_sift, load_gray
 from scenebot.localize.index import DescriptorIndex, MapDescriptors
 from scenebot.localize.match import Matches, match_to_map
@@ -33,6 +33,7 @@ class FailureReason(enum.StrEnum):
     NO_POSE = "no_pose"
     TOO_FEW_INLIERS = "too_few_inliers"
     IMPLAUSIBLE_POSE = "implausible_pose"
+    UNCERTAIN_POSE = "uncertain_pose"
     INCONSISTENT_WITH_ODOMETRY = "inconsistent_with_odometry"
     INCONSISTENT_WITH_COMPASS = "inconsistent_with_compass"
 
@@ -74,6 +75,8 @@ class PoseEstimate:
         rmse_px: reprojection RMSE of the inliers (pixels).
         method: ``"dlt"`` or ``"pycolmap"``.
         timings_s: seconds spent in ``extract``, ``match``, ``pose``, ``total``.
+        position_std_m: predicted 1-sigma error of the camera centre in the plane, along its
+            worst direction (m; :func:`scenebot.localize.dlt.position_std_m`), or None.
     """
 
     R: np.ndarray
@@ -85,6 +88,7 @@ class PoseEstimate:
     rmse_px: float
     method: str
     timings_s: dict = field(default_factory=dict)
+    position_std_m: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -115,6 +119,7 @@ class PoseEstimate:
             "num_matches": self.num_matches,
             "num_inliers": self.num_inliers,
             "rmse_px": self.rmse_px,
+            "position_std_m": self.position_std_m,
             "timings_s": self.timings_s,
         }
 
@@ -194,11 +199,14 @@ def _undistorted_pinhole(camera, xy: np.ndarray) -> tuple[np.ndarray, float, flo
 
 def estimate_pose(
     keypoints: np.ndarray, matches: Matches, camera, cfg: LocalizeConfig
-) -> tuple[np.ndarray, np.ndarray, float, int, float] | None:
+) -> tuple[np.ndarray, np.ndarray, float, int, float, float] | None:
     """Absolute pose from the matches with the configured method.
 
     Returns:
-        (R (3, 3), t (3,), focal_px, num_inliers, rmse_px), or None if no pose was found.
+        (R (3, 3), t (3,), focal_px, num_inliers, rmse_px, position_std_m), or None if no
+        pose was found. ``position_std_m``: the predicted planar error of the centre
+        (:func:`scenebot.localize.dlt.position_std_m`, image noise = the inliers' RMSE, at
+        least ``cfg.min_noise_px``).
     """
     x = keypoints[matches.query_idx]
     X = matches.xyz
@@ -218,7 +226,9 @@ def estimate_pose(
         inl = np.asarray(res["inlier_mask"], bool)
         uv = np.asarray(camera.img_from_cam(X[inl] @ R.T + t), float)
         rmse = float(np.sqrt(((uv[:, :2] - x[inl]) ** 2).sum(axis=1).mean())) if inl.any() else 0.0
-        return R, t, float(camera.mean_focal_length()), int(res["num_inliers"]), rmse
+        xu, f, cx, cy = _undistorted_pinhole(camera, x[inl])
+        std = position_std_m(xu, X[inl], f, cx, cy, R, t, max(rmse, cfg.min_noise_px))
+        return R, t, float(camera.mean_focal_length()), int(res["num_inliers"]), rmse, std
     xu, f, cx, cy = _undistorted_pinhole(camera, x)
     pose = ransac_dlt_pose(
         xu,
@@ -234,7 +244,10 @@ def estimate_pose(
     )
     if pose is None:
         return None
-    return pose.R, pose.t, pose.focal_px, int(pose.inliers.sum()), pose.rmse_px
+    m = pose.inliers
+    std = position_std_m(xu[m], X[m], pose.focal_px, cx, cy, pose.R, pose.t,
+                         max(pose.rmse_px, cfg.min_noise_px))  # fmt: skip
+    return pose.R, pose.t, pose.focal_px, int(m.sum()), pose.rmse_px, std
 
 
 def localize(
@@ -287,15 +300,19 @@ def localize(
     timings["total"] = t3 - t0
     if pose is None:
         return LocalizationFailure(FailureReason.NO_POSE, len(kps), len(matches), 0, timings)
-    R, t, f, n_inl, rmse = pose
+    R, t, f, n_inl, rmse, std = pose
     if n_inl < cfg.min_inliers:
         return LocalizationFailure(
             FailureReason.TOO_FEW_INLIERS, len(kps), len(matches), n_inl, timings
         )
-    est = PoseEstimate(R, t, f, len(kps), len(matches), n_inl, rmse, cfg.method, timings)
+    est = PoseEstimate(R, t, f, len(kps), len(matches), n_inl, rmse, cfg.method, timings, std)
     if not plausible_robot_camera(est, cfg):
         return LocalizationFailure(
             FailureReason.IMPLAUSIBLE_POSE, len(kps), len(matches), n_inl, timings
+        )
+    if cfg.max_position_std_m is not None and not std <= cfg.max_position_std_m:
+        return LocalizationFailure(
+            FailureReason.UNCERTAIN_POSE, len(kps), len(matches), n_inl, timings
         )
     return est
 
