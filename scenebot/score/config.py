@@ -139,8 +139,9 @@ class GoalsConfig(BaseModel):
         lt=1.0,
         description="Diminishing returns: exploration is also complete when the mean view "
         "score over the candidates (the predicted rendering error over the free space) fell "
-        "by less than this fraction of the previous round's since that round (a mean that "
-        "rose means the round opened unknown space: exploration goes on). The best score "
+        "or rose by less than this fraction of the previous round's since that round (a mean "
+        "that rose by more means the round opened unknown space: exploration goes on). The "
+        "best score "
         "alone rarely falls below complete_threshold_deg: a view of never-photographed "
         "surface (ceiling, behind furniture) keeps it high. 0: off.",
     )

@@ -270,15 +270,16 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
 def diminishing_returns(
     mean_score: float | None, previous_goals_json: Path | None, min_gain: float
 ) -> dict | None:
-    """How much the last round lowered the mean view score, and whether that is too little
+    """How much the last round changed the mean view score, and whether that is too little
     to go on (``min_gain``, a fraction of the previous round's mean).
 
     The mean over the candidates estimates the predicted rendering error averaged over the
     free space; its relative fall from one round to the next is what a round's photos
-    bought. A mean that *rose* is no sign of diminishing returns: the round's photos opened
-    space the map did not know (another room behind a doorway), whose views score poorly
-    until they are photographed, so exploration goes on. None for round 0 (no previous
-    ``goals.json``) or when a mean is missing.
+    bought. A mean that *rose* by ``min_gain`` or more is no sign of diminishing returns:
+    the round's photos opened space the map did not know (another room behind a doorway),
+    whose views score poorly until they are photographed, so exploration goes on. The map is
+    complete when the mean moved by less than ``min_gain`` either way. None for round 0 (no
+    previous ``goals.json``) or when a mean is missing.
     """
     if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
         return None
@@ -288,10 +289,10 @@ def diminishing_returns(
     gain = (prev - mean_score) / prev
     out = {"previous_mean_score_deg": prev, "mean_score_deg": round(mean_score, 4),
            "gain": round(gain, 4), "min_gain": min_gain,
-           "complete": bool(min_gain > 0 and 0 <= gain < min_gain)}  # fmt: skip
+           "complete": bool(min_gain > 0 and abs(gain) < min_gain)}  # fmt: skip
     if out["complete"]:
         out["reason"] = (
-            f"diminishing returns: the mean view score fell {100 * gain:.1f}% "
+            f"diminishing returns: the mean view score changed by {-100 * gain:+.1f}% "
             f"({prev:.1f} -> {mean_score:.1f} deg) since the previous round, less than "
             f"goals.min_score_gain = {100 * min_gain:.0f}%"
         )
