@@ -216,6 +216,28 @@ def test_replanning_moves_a_goal_off_a_freshly_marked_obstacle():
     assert 0.1 < np.hypot(*(end - goal)) <= 0.3
 
 
+def test_bump_marks_that_wall_the_robot_in_are_forgotten():
+    """Bumps mark disks around the robot until no route leaves its spot; the map alone has
+    one, so the planner forgets the marks and plans it. A goal the map itself walls off
+    stays unreachable (marks or not)."""
+    from scenebot.plan.path import GridPlanner, PlanFailure, PlanFailureReason, plan_path
+
+    grid, _ = _grid()
+    start, goal = np.array([0.8, 0.8]), np.array([3.2, 3.2])
+    planner = GridPlanner(grid)
+    for a in np.linspace(0, 2 * np.pi, 12, endpoint=False):  # a ring of marks at 0.4 m
+        planner.mark_obstacle(start + 0.4 * np.array([np.cos(a), np.sin(a)]), 0.15)
+    walled = plan_path(planner.grid, start, goal)
+    assert isinstance(walled, PlanFailure) and walled.reason is PlanFailureReason.NO_ROUTE
+    path = planner(start, goal)
+    assert not isinstance(path, PlanFailure) and planner.forgotten_marks == 1
+    assert np.array_equal(planner.grid.lethal, grid.lethal)  # the marks are gone
+    # inside the pillar (walled off by the map itself): no route, nothing forgotten
+    planner.mark_obstacle(np.array([0.8, 2.0]), 0.2)
+    inside = planner(start, np.array([2.0, 2.0]))
+    assert isinstance(inside, PlanFailure) and planner.forgotten_marks == 1
+
+
 def test_an_abandoned_goal_is_replaced_by_the_next_unused_backup():
     """Goal 0 is reached; goal 1 is given up on the way, and so is its first backup; the
     second backup is reached and photographed; the backup the plan stage already used is

@@ -94,19 +94,8 @@ def photo_view_counts(
     hfov_deg: float,
     size: tuple[int, int] = VIEW_SIZE,
 ) -> np.ndarray:
-    """Per surface sample, the number of photos that see it (:func:`photo_visibility`).
-
-    Args:
-        points: (M, 3) surface samples (world, m).
-        poses: (R_cam_from_world, centre) per photo
-            (:func:`scenebot.evaluate.metrics.true_photo_poses`).
-        scene: the true :class:`~scenebot.scene.mesh.SceneMesh`.
-        hfov_deg: the photos' horizontal field of view (deg).
-        size: (width, height) of the depth maps of the visibility test.
-
-    Returns:
-        (M,) int32 counts.
-    """
+    """Per surface sample, the number of photos that see it: (M,) int32 counts (the
+    arguments are :func:`photo_visibility`'s)."""
     vis = photo_visibility(points, poses, scene, hfov_deg, size)
     return count_views(vis, len(points))
 

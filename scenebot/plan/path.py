@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -10,6 +11,8 @@ import numpy as np
 from scenebot.plan.astar import astar, effective_cost
 from scenebot.plan.navgrid import NavGrid
 from scenebot.plan.simplify import polyline_cost, simplify_path
+
+log = logging.getLogger(__name__)
 
 
 class PlanFailureReason(enum.StrEnum):
@@ -149,6 +152,11 @@ def _blocked(res, goal_xy: np.ndarray) -> PlanFailure:
 class GridPlanner:
     """Plans on a navigation grid and learns obstacles found by the bumper while following.
 
+    Bump marks are local guesses (a disk around the contact point). When they wall the robot
+    in, so that no route leaves the spot it stands on, but the map alone has one, the marks
+    are forgotten and that route is returned (``forgotten_marks`` counts it): the robot meets
+    a real obstacle again, and gives up on the goal after ``follow.max_obstacles`` bumps.
+
     Args:
         grid: the navigation grid (copied; the original is not changed).
         simplify_factor: see :func:`scenebot.plan.simplify.simplify_path`.
@@ -164,9 +172,22 @@ class GridPlanner:
             grid.cost_per_m.copy(),
         )
         self.simplify_factor = simplify_factor
+        self._map_lethal = grid.lethal.copy()  # the map's obstacles, without bump marks
+        self.forgotten_marks = 0
 
     def __call__(self, start_xy: np.ndarray, goal_xy: np.ndarray) -> PlannedPath | PlanFailure:
-        return plan_path(self.grid, start_xy, goal_xy, self.simplify_factor)
+        res = plan_path(self.grid, start_xy, goal_xy, self.simplify_factor)
+        marked = not np.array_equal(self.grid.lethal, self._map_lethal)
+        if isinstance(res, PlanFailure) and res.reason is PlanFailureReason.NO_ROUTE and marked:
+            g = self.grid
+            plain = NavGrid(g.geometry, g.counts, g.kde, g.score, self._map_lethal, g.cost_per_m)
+            alt = plan_path(plain, start_xy, goal_xy, self.simplify_factor)
+            if isinstance(alt, PlannedPath):
+                self.grid.lethal = self._map_lethal.copy()
+                self.forgotten_marks += 1
+                log.info("bump marks wall the robot in: forgotten, planning on the map alone")
+                return alt
+        return res
 
     def mark_obstacle(self, xy: np.ndarray, radius_m: float) -> int:
         """Make the cells within ``radius_m`` of ``xy`` (m) lethal; returns how many changed."""
