@@ -175,26 +175,32 @@ def test_goals_keep_enough_photographed_surface_to_register(scored_room, tmp_pat
 
 
 @pytest.mark.parametrize(
-    ("previous_mean", "complete"),
-    # x the round's own mean score; 0.8: the mean rose by a quarter (the round opened unknown
-    # space); 0.99: it rose by 1% (noise: nothing new either)
-    [(None, False), (1.5, False), (1.05, True), (0.8, False), (0.99, True)],
+    ("previous_mean", "previous_area", "complete"),
+    [
+        (None, None, False),  # round 0: no previous goals.json
+        (1.5, 1.0, False),  # the mean fell by a third: the round bought much
+        (1.05, 1.0, True),  # it fell by 5%, the free space the same: diminishing returns
+        (0.99, 1.0, True),  # it rose by 1%: noise, nothing new either
+        (0.8, 1.0, False),  # it rose by a quarter: views of something new
+        (1.05, 0.6, False),  # the free space grew by two thirds: a new room opened
+    ],  # x the round's own mean score and free area
 )
 def test_a_round_that_buys_too_little_completes_exploration(
-    scored_room, tmp_path, previous_mean, complete
+    scored_room, tmp_path, previous_mean, previous_area, complete
 ):
-    """goals.min_score_gain: when the mean view score fell by less than that fraction since
-    the previous round, the map is complete (diminishing returns), with the reason; round 0
-    (no previous goals.json) never completes this way."""
-    mean = scored_room["doc"]["mean_score_deg"]
-    assert 0 < mean <= 180
+    """goals.min_score_gain and min_area_gain: when the mean view score moved by less than
+    that fraction since the previous round and the free space did not grow, the map is
+    complete (diminishing returns), with the reason; round 0 never completes this way."""
+    mean, area = scored_room["doc"]["mean_score_deg"], scored_room["doc"]["free_area_m2"]
+    assert 0 < mean <= 180 and area > 0
     prev = None
     if previous_mean is not None:
         prev = tmp_path / "round_000" / "goals.json"
         prev.parent.mkdir()
-        prev.write_text(json.dumps({"mean_score_deg": previous_mean * mean}))
+        prev.write_text(json.dumps({"mean_score_deg": previous_mean * mean,
+                                    "free_area_m2": previous_area * area}))  # fmt: skip
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15),
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1),
         GoalsInputs(
             scored_room["so"].candidates_csv,
             scored_room["mo"].freespace_npz,
@@ -207,5 +213,6 @@ def test_a_round_that_buys_too_little_completes_exploration(
         assert doc["score_gain"] is None
     else:
         assert doc["score_gain"]["gain"] == pytest.approx(1 - 1 / previous_mean, abs=1e-3)
+        assert doc["score_gain"]["area_gain"] == pytest.approx(1 / previous_area - 1, abs=1e-3)
     assert ("diminishing returns" in doc.get("complete_because", "")) is complete
     assert doc["goals"]  # the goals are still listed, for information

@@ -137,13 +137,19 @@ class GoalsConfig(BaseModel):
         0.15,
         ge=0.0,
         lt=1.0,
-        description="Diminishing returns: exploration is also complete when the mean view "
-        "score over the candidates (the predicted rendering error over the free space) fell "
-        "or rose by less than this fraction of the previous round's since that round (a mean "
-        "that rose by more means the round opened unknown space: exploration goes on). The "
-        "best score "
-        "alone rarely falls below complete_threshold_deg: a view of never-photographed "
-        "surface (ceiling, behind furniture) keeps it high. 0: off.",
+        description="Diminishing returns: exploration is also complete when, since the "
+        "previous round, the mean view score over the candidates (the predicted rendering "
+        "error over the free space) moved by less than this fraction either way and the free "
+        "space grew by less than min_area_gain. The best score alone rarely falls below "
+        "complete_threshold_deg: a view of never-photographed surface (ceiling, behind "
+        "furniture) keeps it high. 0: off.",
+    )
+    min_area_gain: float = Field(
+        0.1,
+        ge=0.0,
+        description="See min_score_gain: a round whose photos grew the free space by this "
+        "fraction or more opened space the map did not know (another room), and exploration "
+        "goes on.",
     )
     min_seen_fraction: float = Field(
         0.4,

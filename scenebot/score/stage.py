@@ -225,7 +225,8 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     )
     scored = any_valid & np.isfinite(cols["score_deg"])
     mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
-    returns = diminishing_returns(mean_score, inputs.previous_goals_json, cfg.min_score_gain)
+    returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
+                                  cfg.min_score_gain, cfg.min_area_gain)  # fmt: skip
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
@@ -242,6 +243,7 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
             "nms_radius_m": cfg.nms_radius_m,
             "nms_angle_deg": cfg.nms_angle_deg,
             "mean_score_deg": None if mean_score is None else round(mean_score, 4),
+            "free_area_m2": round(fs.area_m2, 4),
             "score_gain": returns,
         },
     )
@@ -268,33 +270,44 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
 
 
 def diminishing_returns(
-    mean_score: float | None, previous_goals_json: Path | None, min_gain: float
+    mean_score: float | None,
+    free_area_m2: float,
+    previous_goals_json: Path | None,
+    min_gain: float,
+    min_area_gain: float,
 ) -> dict | None:
-    """How much the last round changed the mean view score, and whether that is too little
-    to go on (``min_gain``, a fraction of the previous round's mean).
+    """What the last round bought, and whether that is too little to go on.
 
-    The mean over the candidates estimates the predicted rendering error averaged over the
-    free space; its relative fall from one round to the next is what a round's photos
-    bought. A mean that *rose* by ``min_gain`` or more is no sign of diminishing returns:
-    the round's photos opened space the map did not know (another room behind a doorway),
-    whose views score poorly until they are photographed, so exploration goes on. The map is
-    complete when the mean moved by less than ``min_gain`` either way. None for round 0 (no
-    previous ``goals.json``) or when a mean is missing.
+    Two measures, each against the previous round's ``goals.json``: the mean view score over
+    the candidates (the predicted rendering error averaged over the free space) and the free
+    space's area. Photos of known space lower the mean; photos that open space the map did
+    not know (another room behind a doorway) grow the free space, and raise the mean while
+    the new space is still unphotographed. The map is complete when the mean moved by less
+    than ``min_gain`` (a fraction of the previous mean) either way *and* the free space grew
+    by less than ``min_area_gain``. None for round 0 (no previous ``goals.json``) or when a
+    measure is missing.
     """
     if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
         return None
-    prev = json.loads(previous_goals_json.read_text(encoding="utf-8")).get("mean_score_deg")
-    if not prev:
+    prev_doc = json.loads(previous_goals_json.read_text(encoding="utf-8"))
+    prev, prev_area = prev_doc.get("mean_score_deg"), prev_doc.get("free_area_m2")
+    if not prev or not prev_area:
         return None
     gain = (prev - mean_score) / prev
+    area_gain = (free_area_m2 - prev_area) / prev_area
     out = {"previous_mean_score_deg": prev, "mean_score_deg": round(mean_score, 4),
            "gain": round(gain, 4), "min_gain": min_gain,
-           "complete": bool(min_gain > 0 and abs(gain) < min_gain)}  # fmt: skip
+           "previous_free_area_m2": prev_area, "free_area_m2": round(free_area_m2, 4),
+           "area_gain": round(area_gain, 4), "min_area_gain": min_area_gain,
+           "complete": bool(min_gain > 0 and abs(gain) < min_gain
+                            and area_gain < min_area_gain)}  # fmt: skip
     if out["complete"]:
         out["reason"] = (
-            f"diminishing returns: the mean view score changed by {-100 * gain:+.1f}% "
-            f"({prev:.1f} -> {mean_score:.1f} deg) since the previous round, less than "
-            f"goals.min_score_gain = {100 * min_gain:.0f}%"
+            f"diminishing returns: since the previous round the mean view score changed by "
+            f"{-100 * gain:+.1f}% ({prev:.1f} -> {mean_score:.1f} deg; goals.min_score_gain "
+            f"= {100 * min_gain:.0f}%) and the free space by {100 * area_gain:+.1f}% "
+            f"({prev_area:.1f} -> {free_area_m2:.1f} m^2; goals.min_area_gain = "
+            f"{100 * min_area_gain:.0f}%)"
         )
     return out
 
