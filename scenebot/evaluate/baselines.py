@@ -288,7 +288,8 @@ def plot_baselines(summary: dict, png: Path) -> Path:
         comp = (s["dense"].get("2cm") or {}).get("completeness")
         label = f"{name}: {s['photos']} photos"
         if comp is not None:
-            ax_c.plot(s["photos"], 100 * comp, "o", color=color, ms=11, mec="k")
+            # smaller for each later campaign: equal figures at equal photo counts stay visible
+            ax_c.plot(s["photos"], 100 * comp, "o", color=color, ms=13 - 3 * x, mec="k")
             label += f", {100 * comp:.1f}% complete at 2 cm"
         handles.append(Line2D([], [], color=color, lw=2, label=label))
         for th, marker in (("1cm", "v"), ("2cm", "o"), ("5cm", "^")):
