@@ -215,6 +215,13 @@ def _camera_matrix(f: float, cx: float, cy: float, R: np.ndarray, t: np.ndarray)
     return K @ np.hstack([R, t[:, None]])
 
 
+def _pinhole_residuals(c: np.ndarray, x: np.ndarray, f: float, cx: float, cy: float) -> np.ndarray:
+    """(2n,) reprojection residuals (u..., v...) in pixels of camera-frame points ``c``
+    (n, 3) against pixels ``x`` (n, 2)."""
+    z = np.where(np.abs(c[:, 2]) < 1e-9, 1e-9, c[:, 2])
+    return np.concatenate([f * c[:, 0] / z + cx - x[:, 0], f * c[:, 1] / z + cy - x[:, 1]])
+
+
 def refine_f_r_t(
     x: np.ndarray,
     X: np.ndarray,
@@ -243,12 +250,7 @@ def refine_f_r_t(
 
     def residuals(p: np.ndarray) -> np.ndarray:
         ff = p[6] if refine_focal else f
-        Rm = cv2.Rodrigues(p[:3])[0]
-        c = X @ Rm.T + p[3:6]
-        z = np.where(np.abs(c[:, 2]) < 1e-9, 1e-9, c[:, 2])
-        u = ff * c[:, 0] / z + cx - x[:, 0]
-        v = ff * c[:, 1] / z + cy - x[:, 1]
-        return np.concatenate([u, v])
+        return _pinhole_residuals(X @ cv2.Rodrigues(p[:3])[0].T + p[3:6], x, ff, cx, cy)
 
     p0 = np.concatenate([rvec0, t, [f] if refine_focal else []])
     sol = optimize.least_squares(residuals, p0, method="lm", x_scale="jac", max_nfev=200)
@@ -290,10 +292,7 @@ def position_std_m(
     c0 = -np.asarray(R, float).T @ np.asarray(t, float)
 
     def residuals(p: np.ndarray) -> np.ndarray:
-        Rm = cv2.Rodrigues(p[:3])[0]
-        c = (X - p[3:6]) @ Rm.T
-        z = np.where(np.abs(c[:, 2]) < 1e-9, 1e-9, c[:, 2])
-        return np.concatenate([f * c[:, 0] / z + cx - x[:, 0], f * c[:, 1] / z + cy - x[:, 1]])
+        return _pinhole_residuals((X - p[3:6]) @ cv2.Rodrigues(p[:3])[0].T, x, f, cx, cy)
 
     p0 = np.concatenate([rvec0, c0])
     r0 = residuals(p0)

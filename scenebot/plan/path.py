@@ -177,8 +177,11 @@ class GridPlanner:
 
     def __call__(self, start_xy: np.ndarray, goal_xy: np.ndarray) -> PlannedPath | PlanFailure:
         res = plan_path(self.grid, start_xy, goal_xy, self.simplify_factor)
-        marked = not np.array_equal(self.grid.lethal, self._map_lethal)
-        if isinstance(res, PlanFailure) and res.reason is PlanFailureReason.NO_ROUTE and marked:
+        if (
+            isinstance(res, PlanFailure)
+            and res.reason is PlanFailureReason.NO_ROUTE
+            and not np.array_equal(self.grid.lethal, self._map_lethal)  # bump marks exist
+        ):
             g = self.grid
             plain = NavGrid(g.geometry, g.counts, g.kde, g.score, self._map_lethal, g.cost_per_m)
             alt = plan_path(plain, start_xy, goal_xy, self.simplify_factor)
