@@ -147,3 +147,94 @@ def test_oriented_ransac_finds_the_steps_not_the_slope_across_them():
     assert len(planes) == 12
     for p in planes:  # every one a tread or a riser
         assert max(abs(p.normal[0]), abs(p.normal[2])) > np.cos(np.radians(2))
+
+
+def _room_view():
+    """A camera at the origin looking along +z into a corner region: the wall z = 3 m and
+    the floor y = 0.5 m (camera y points down), both plain except for a textured rim."""
+    v = np.mgrid[0:H, 0:W][0] + 0.5
+    ray_y = (v - K[1, 2]) / K[1, 1]
+    with np.errstate(divide="ignore"):
+        floor_z = np.where(ray_y > 0, 0.5 / ray_y, np.inf)
+    truth = np.minimum(floor_z, 3.0).astype(np.float32)
+    return truth
+
+
+def test_a_plain_corner_is_filled_with_the_planes_that_bound_it():
+    """Wall and floor meet; both are measured only along the image border. With the
+    bounding-planes rule (and the boundary planes' hulls as extents) each hole pixel lands
+    on the plane its ray meets first: wall pixels on the wall, floor pixels on the floor."""
+    from scenebot.dense.planefill import carved_hulls
+
+    truth = _room_view()
+    d = np.zeros_like(truth)
+    d[:8], d[-8:], d[:, :8], d[:, -8:] = truth[:8], truth[-8:], truth[:, :8], truth[:, -8:]
+    planes = planes_of(d)
+    assert len(planes) == 2
+    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)]), strict=True):
+        pl.occupied = ext
+    _, _, filled_same, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0))
+    front, _, filled_front, _ = fill_view(
+        d, NORMAL, K, R, T, planes, (0.2, 10.0), bounding_planes=True
+    )
+    hole = d == 0
+    assert filled_front > filled_same  # holes bounded by two planes are filled too
+    got = front[hole] > 0
+    assert got.mean() > 0.7
+    assert np.allclose(front[hole][got], truth[hole][got], rtol=1e-3)
+
+
+def test_a_boundary_wall_spans_the_plain_paint_between_its_posters():
+    """Posters near the corners of a plain wall: its cells hold only them, the carved hull
+    spans the wall between them, and a doorway seen through is carved out."""
+    from scenebot.dense.planefill import carved_hulls
+
+    d = wall()
+    keep = np.zeros_like(d, bool)
+    for r0, c0 in ((5, 5), (5, 130), (90, 5), (90, 130)):
+        keep[r0 : r0 + 25, c0 : c0 + 25] = True
+    d[~keep] = 0
+    door = wall()
+    door[:, :] = 0
+    door[40:80, 70:90] = 6.0  # the room beyond a doorway in the wall, seen through it
+    planes = planes_of(d)
+    (ext,) = carved_hulls(planes, [(d, K, R, T), (door, K, R, T)], stride=1)
+    pl = planes[0]
+    middle = backproject(wall(), K, R, T)[50:70, 40:60].reshape(-1, 3)
+    assert not pl.inside(middle).any()  # its cells: the posters only
+    pl.occupied = ext
+    assert pl.inside(middle).all()  # the hull spans the plain paint
+    doorway = backproject(wall(), K, R, T)[50:70, 76:84].reshape(-1, 3)
+    assert not pl.inside(doorway).any()  # seen through: carved
+
+
+def test_a_box_face_is_not_widened_past_its_cells():
+    """A plane with the room measured behind it (a box face 2 m away before the 3 m wall)
+    is no boundary: it keeps its own cells."""
+    from scenebot.dense.planefill import carved_hulls
+
+    d = wall()
+    d[20:45, 20:45] = 2.0
+    d[75:100, 115:140] = 2.0  # two textured corners of a plain box face at 2 m
+    planes = planes_of(d)
+    face = next(j for j, p in enumerate(planes) if abs(abs(p.offset) - 2.0) < 0.01)
+    exts = carved_hulls(planes, [(d, K, R, T)])
+    assert np.array_equal(exts[face], planes[face].occupied)
+    wallj = 1 - face
+    assert exts[wallj].sum() >= planes[wallj].occupied.sum()
+
+
+def test_a_shadow_plane_a_few_centimetres_off_is_dropped():
+    """Three views put the wall at 3.00 m, one (a slightly wrong pose) at 2.94 m: the shadow
+    is as large in points as the wall but fewer views support it."""
+    from scenebot.dense.planefill import shadow_planes
+
+    wall_pts = backproject(wall(3.0), K, R, T).reshape(-1, 3)
+    shadow_pts = backproject(wall(2.94), K, R, T).reshape(-1, 3)
+    planes = detect_planes(np.r_[wall_pts, shadow_pts], distance_m=0.01, min_share=0.05)
+    assert len(planes) == 2
+    depth = [round(-p.offset / p.normal[2], 2) for p in planes]
+    support = np.array([3 if abs(z - 3.0) < 0.01 else 1 for z in depth])
+    why = shadow_planes(planes, support, max_gap_m=0.1)
+    assert [depth[j] for j in why] == [2.94]
+    assert shadow_planes(planes, support, max_gap_m=0.03) == {}  # 6 cm apart: both kept

@@ -45,3 +45,14 @@ def test_too_few_registered(rig):
         one.deregister_frame(one.image(i).frame_id)
     with pytest.raises(ValueError, match="1 registered image"):
         select_views(one)
+
+
+def test_a_wide_baseline_outranks_a_close_neighbour_with_more_points():
+    """Turn-in-place neighbours share many points at 2 degrees; a view from the next circle
+    shares fewer at 12. The squared angle weight puts the wide one first."""
+    from scenebot.dense.views import _angle_weight
+
+    close, wide = 240 * _angle_weight(2.0, 1.0, 10.0), 90 * _angle_weight(12.0, 1.0, 10.0)
+    assert wide > close
+    assert _angle_weight(0.5, 1.0, 10.0) == 0.0  # below the minimum angle: never
+    assert _angle_weight(60.0, 1.0, 10.0) < _angle_weight(30.0, 1.0, 10.0) == 1.0

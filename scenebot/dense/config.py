@@ -123,6 +123,16 @@ class PlaneFillConfig(BaseModel):
             "dense.plane_fill.drop_phantoms, or phantom planes remove real depth."
         ),
     )
+    extent: Literal["cells", "carved_hull"] = Field(
+        "carved_hull",
+        description="A plane's extent: cells, the raster cells holding its points (closed "
+        "over extent_close_cells); carved_hull, their convex hull less the cells that "
+        "measured depth beyond the plane is seen through (doorways, the room beyond a plane "
+        "that ends), so a plain wall spans the space between its posters, corners and edges.",
+    )
+    carve_min_rays: int = Field(
+        2, ge=1, description="carved_hull: rays seen through a cell that carve it out."
+    )
     label_distance_m: float = Field(
         0.02, gt=0, description="A measured pixel lies on a plane within this distance (m) ..."
     )
@@ -135,6 +145,13 @@ class PlaneFillConfig(BaseModel):
         gt=0,
         le=1,
         description="A hole looks this far (share of the image width) for measured depth.",
+    )
+    fill_rule: Literal["same_plane", "bounding_planes"] = Field(
+        "bounding_planes",
+        description="same_plane: a hole is filled with the plane most of its 8 nearest "
+        "measured neighbours lie on; bounding_planes: a hole whose neighbours lie on planes "
+        "(any planes: wall, floor, another wall) is filled, each pixel with the bounding plane "
+        "its ray meets first.",
     )
     min_votes: int = Field(
         2, ge=1, le=8, description="Of the 8 directions, this many must find the same plane ..."
@@ -169,6 +186,20 @@ class PlaneFillConfig(BaseModel):
             "carpet)."
         ),
     )
+    shadow_gap_m: float = Field(
+        0.1,
+        ge=0,
+        description="With drop_phantoms: of two parallel planes closer than this (m) whose "
+        "extents overlap, the one fewer views support is a shadow of the other (views whose "
+        "poses are slightly off put a wall a few cm in front of itself) and is dropped; 0: "
+        "keep both.",
+    )
+    support_min_points: int = Field(
+        50,
+        ge=1,
+        description="A view supports a plane when this many of its measured pixels (every "
+        "4th row and column) lie on it.",
+    )
     cull_behind: bool = Field(
         True,
         description=(
@@ -193,6 +224,14 @@ class DenseConfig(BaseModel):
     )
     min_triangulation_angle_deg: float = Field(
         1.0, ge=0, description="Minimum median triangulation angle to a source view, degrees."
+    )
+    full_angle_deg: float = Field(
+        10.0,
+        gt=0,
+        description="Source selection: a source's shared sparse points count fully when their "
+        "median triangulation angle reaches this (degrees), and by the square of the angle's "
+        "share below it. Turn-in-place circles put neighbours 1-2 cm apart, where a pose "
+        "error of 2 mm is a depth error of several per cent.",
     )
     skip_isolated_views: bool = Field(
         True,

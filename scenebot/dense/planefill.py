@@ -11,18 +11,26 @@ carpet). This step, between depth estimation and fusion:
    (a point supports a plane only where its normal agrees within ``normal_deg``), largest
    first, while one still holds ``min_plane_share`` of the points. Each plane keeps its
    extent: the cells of an in-plane raster that hold inliers, closed over gaps. Planes that
-   the measured depth of a sample of views contradicts are dropped (``drop_phantoms``):
-   those seen through (more measured depth behind their extent than on it) and those that
-   lie behind another plane (a slice beneath the floor from a repeating carpet).
-2. **Labels**: a measured pixel carries the label of the plane it lies on (within
+   the measured depth of the views contradicts are dropped (``drop_phantoms``): those seen
+   through (more measured depth behind their extent than on it), those that lie behind
+   another plane (a slice beneath the floor from a repeating carpet), and shadows: of two
+   parallel planes a few centimetres apart (``shadow_gap_m``), the one fewer views support
+   (a circle of photos registered 0.2 degrees off puts its wall a few cm in front of itself).
+2. **Extents** (``extent: carved_hull``): the room's boundary planes (walls, floor, ceiling:
+   almost nothing measured past them) span the convex hull of their cells, less the cells
+   that measured depth is seen through (a doorway). A plain wall then reaches between its
+   posters and corners; a box face keeps its own cells (:func:`carved_hulls`).
+3. **Labels**: a measured pixel carries the label of the plane it lies on (within
    ``distance_m`` or ``rel_distance`` of its depth), or "off-plane".
-3. **Votes**: on a grid of ``cell_px`` cells, every cell without measured depth looks along 8
+4. **Votes**: on a grid of ``cell_px`` cells, every cell without measured depth looks along 8
    directions, up to ``max_gap_frac`` of the image width, for the nearest cell with measured
-   depth; it is filled when at least ``min_votes`` of the found cells, and at least
-   ``min_agreement`` of them, carry the same plane label. A plain region bounded by its own
-   plane is filled; one bounded by something nearer (a plain cabinet face before a wall) is
-   not, because its nearest measured neighbours are the cabinet's edges.
-4. **Fill**: each hole pixel of a filled cell gets the depth where its ray meets the plane
+   depth. With ``fill_rule: bounding_planes`` it is filled when at least ``min_votes`` of the
+   found cells, and at least ``min_agreement`` of them, lie on planes, and each of its pixels
+   takes the bounding plane its ray meets first (a plain corner between two walls and the
+   floor); with ``same_plane`` they must all carry the same plane label. Either way one
+   bounded by something nearer (a plain cabinet face before a wall) is not filled, because
+   its nearest measured neighbours are the cabinet's edges, off every plane.
+5. **Fill**: each hole pixel of a filled cell gets the depth where its ray meets the plane
    (in front of the camera, inside the plane's extent grown by ``extent_margin_m``, within the
    view's depth range) and the plane's normal, turned towards the camera.
 
@@ -59,6 +67,8 @@ class Plane:
         lo: (2,) plane coordinates of the raster's corner.
         occupied: (H, W) bool raster of the extent.
         inliers: number of voxel points on it.
+        boundary: a boundary of the room (nothing measured past it): its extent is its carved
+            hull (:func:`carved_hulls`), and a fill may reach past its cells by the margin.
     """
 
     normal: np.ndarray
@@ -69,6 +79,7 @@ class Plane:
     lo: np.ndarray
     occupied: np.ndarray
     inliers: int
+    boundary: bool = False
 
     def to_2d(self, x: np.ndarray) -> np.ndarray:
         """(N, 3) points -> (N, 2) plane coordinates."""
@@ -320,6 +331,139 @@ def plane_evidence(
     return on.sum(1), back.sum(1), hidden
 
 
+def carved_hulls(
+    planes: list[Plane],
+    samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    distance_m: float = 0.02,
+    rel_distance: float = 0.01,
+    min_rays: int = 2,
+    stride: int = 4,
+    max_beyond: float = 0.1,
+) -> list[np.ndarray]:
+    """The extents of the room's boundary planes widened to the convex hull of their cells,
+    less what is seen through.
+
+    A plain wall holds measured points only on its posters, edges and corners; the hull of
+    those spans the wall between them. Only boundary planes are widened: those beyond
+    which almost nothing was measured (fewer points than ``max_beyond`` times those on the
+    plane), as the walls, floor and ceiling of a room. The face of a box or a cabinet has
+    the room behind it, and its hull could reach where a plain wall behind it was never
+    measured. Where measured depth lies beyond a plane along a ray that crosses its hull (a
+    doorway, the far side of an opening), the crossing's cell is free space: a cell crossed
+    by at least ``min_rays`` such rays, and by more of them than it holds measured points
+    of the plane, is carved out, with its 8 neighbours.
+
+    Args:
+        planes: the planes (their ``occupied`` rasters: cells holding inliers).
+        samples: ``(depth, K, R, t)`` of the views whose measured depth votes.
+        distance_m, rel_distance: a point lies on a plane within the larger of these.
+        min_rays: rays a cell needs to be carved.
+        stride: every ``stride``-th pixel of a depth map votes.
+        max_beyond: a plane is a boundary when the points measured beyond its extension
+            outside the hull are fewer than this share of those on it.
+
+    Returns:
+        One (H, W) bool raster per plane, on the plane's own raster grid; the boundary
+        planes are marked (``Plane.boundary``).
+    """
+    import cv2
+    from scipy.ndimage import binary_dilation
+
+    hulls, through, on = [], [], []
+    beyond = np.zeros(len(planes), np.int64)
+    for pl in planes:
+        ij = np.argwhere(pl.occupied)[:, ::-1].astype(np.int32)  # (x = column, y = row)
+        hull = np.zeros(pl.occupied.shape, np.uint8)
+        cv2.fillConvexPoly(hull, cv2.convexHull(ij), 1)
+        hulls.append(hull.astype(bool) | pl.occupied)
+        through.append(np.zeros(pl.occupied.shape, np.int64))
+        on.append(np.zeros(pl.occupied.shape, np.int64))
+    for depth, K, R, t in samples:
+        d = depth[::stride, ::stride]
+        vv, uu = np.mgrid[0 : depth.shape[0] : stride, 0 : depth.shape[1] : stride]
+        m = d > 0
+        if not m.any():
+            continue
+        z_meas = d[m].astype(np.float64)
+        ray = np.stack([(uu[m] + 0.5 - K[0, 2]) / K[0, 0], (vv[m] + 0.5 - K[1, 2]) / K[1, 1],
+                        np.ones(m.sum())], -1) @ R  # fmt: skip
+        centre = -R.T @ t
+        X = centre + z_meas[:, None] * ray
+        tol = np.maximum(distance_m, rel_distance * z_meas)
+        for j, pl in enumerate(planes):
+            shape = np.array(pl.occupied.shape)
+            cell = np.floor((pl.to_2d(X) - pl.lo) / pl.cell_m).astype(np.int64)
+            sel = (np.abs(X @ pl.normal + pl.offset) < tol) & np.all(
+                (cell >= 0) & (cell < shape), 1
+            )
+            np.add.at(on[j], (cell[sel, 0], cell[sel, 1]), 1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z = -(centre @ pl.normal + pl.offset) / (ray @ pl.normal)
+            cand = np.isfinite(z) & (z > 0) & (z < z_meas * (1 - rel_distance) - 2 * distance_m)
+            if not cand.any():
+                continue
+            cell = np.floor((pl.to_2d(centre + z[cand, None] * ray[cand]) - pl.lo) / pl.cell_m)
+            cell = cell.astype(np.int64)
+            sel = np.all((cell >= 0) & (cell < shape), 1)
+            in_hull = np.zeros(len(cell), bool)
+            in_hull[sel] = hulls[j][cell[sel, 0], cell[sel, 1]]
+            beyond[j] += int((~in_hull).sum())  # seen past the plane where it is not
+            np.add.at(through[j], (cell[in_hull, 0], cell[in_hull, 1]), 1)
+    out = []
+    for j, (pl, hull, thr, onj) in enumerate(zip(planes, hulls, through, on, strict=True)):
+        if beyond[j] > max_beyond * onj.sum():
+            out.append(pl.occupied)
+            continue
+        pl.boundary = True
+        carved = binary_dilation((thr >= min_rays) & (thr > onj), np.ones((3, 3), bool))
+        out.append(pl.occupied | (hull & ~carved))
+    return out
+
+
+def shadow_planes(
+    planes: list[Plane], support: np.ndarray, max_gap_m: float, max_angle_deg: float = 5.0,
+    min_overlap: float = 0.3,
+) -> dict[int, str]:  # fmt: skip
+    """Planes that shadow a plane seen by more views, a few centimetres beside it.
+
+    A handful of views whose poses are slightly off (a turn-in-place circle registered with a
+    0.2 degree error between its photos) put the wall they see a few centimetres in front of
+    where every other view puts it, and RANSAC finds that shadow as a plane of its own,
+    parallel to the wall and as large in points. The wall is the one more views support.
+
+    Args:
+        planes: the planes, with their extents.
+        support: (P,) number of views whose measured depth lies on each plane.
+        max_gap_m: parallel planes closer than this are one surface seen twice.
+        max_angle_deg: planes within this angle are parallel.
+        min_overlap: share of the weaker plane's cells inside the stronger one's extent.
+
+    Returns:
+        {index: reason} of the shadow planes.
+    """
+    why: dict[int, str] = {}
+    cos_par = np.cos(np.radians(max_angle_deg))
+    order = sorted(range(len(planes)), key=lambda j: -support[j])
+    for a, i in enumerate(order):
+        if i in why:
+            continue
+        pi = planes[i]
+        for j in order[a + 1 :]:
+            pj = planes[j]
+            if j in why or support[j] >= support[i] or abs(pi.normal @ pj.normal) < cos_par:
+                continue  # (as many views on both: no telling which is the surface)
+            gap = abs(pj.origin @ pi.normal + pi.offset)
+            if gap > max_gap_m:
+                continue
+            cells = np.argwhere(pj.occupied)
+            X = pj.origin + (pj.lo + (cells + 0.5) * pj.cell_m) @ pj.basis
+            overlap = float(pi.inside(X).mean()) if len(X) else 0.0
+            if overlap >= min_overlap:
+                why[j] = (f"shadow of a plane {100 * gap:.1f} cm away ({100 * overlap:.0f}% "
+                          f"overlap), seen by {support[j]} views against {support[i]}")  # fmt: skip
+    return why
+
+
 def validate_planes(
     planes: list[Plane], on: np.ndarray, behind: np.ndarray, hidden: np.ndarray,
     max_seen_through: float, max_hidden: float,
@@ -357,6 +501,7 @@ def fill_view(
     min_agreement: float = 0.6,
     extent_margin_m: float = 0.05,
     cull_behind: bool = True,
+    bounding_planes: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Fill one view's holes from the planes (see the module docstring).
 
@@ -379,11 +524,18 @@ def fill_view(
     centre = -R.T @ t
     ray = ray_cam @ R  # world directions with unit z in the camera
     hits = np.full((len(planes), h * w), np.inf)
+    hits_fill = np.full((len(planes), h * w), np.inf) if bounding_planes else None
     for j, pl in enumerate(planes):
         denom = ray @ pl.normal
         with np.errstate(divide="ignore", invalid="ignore"):
             z = -(centre @ pl.normal + pl.offset) / denom  # z-depth (ray has unit camera z)
         ok = np.isfinite(z) & (z > 0)
+        if bounding_planes:  # where a fill may put this plane: a boundary's extent grown by
+            # the margin; an object's face only on its own cells (its edge is the object's)
+            okf = ok & (np.abs(denom) > 0.1 * np.linalg.norm(ray, axis=1))
+            margin = extent_margin_m if pl.boundary else 0.0
+            okf[okf] = pl.inside(centre + z[okf, None] * ray[okf], margin)
+            hits_fill[j, okf] = z[okf]
         ok[ok] = pl.inside(centre + z[ok, None] * ray[ok])
         hits[j, ok] = z[ok]
     culled = 0
@@ -417,6 +569,13 @@ def fill_view(
     near = _nearest_labels(cell_label, cell_measured, max(1, int(max_gap_frac * wc)))
     found = (near >= -1).sum(0)
     votes = np.stack([(near == j).sum(0) for j in range(len(planes))])
+    out_d, out_n = depth.copy(), normal.copy()
+    lo, hi = depth_range
+    if bounding_planes:
+        filled = _fill_front(out_d, out_n, measured, cell_label, cell_measured, votes, found,
+                             ray, hits_fill, centre, R, planes, cell_px, min_votes,
+                             min_agreement, (lo, hi))  # fmt: skip
+        return out_d, out_n, filled, culled
     winner = votes.argmax(0)
     top = votes.max(0)
     vote_ok = (top >= min_votes) & (top >= min_agreement * np.maximum(found, 1))
@@ -430,9 +589,7 @@ def fill_view(
     v, u = np.nonzero(target)
     flat = v * w + u
     ray, hits = ray[flat], hits[:, flat]
-    out_d, out_n = depth.copy(), normal.copy()
     filled = 0
-    lo, hi = depth_range
     for j, pl in enumerate(planes):
         m = px_label[v, u] == j
         if not m.any():
@@ -455,6 +612,68 @@ def fill_view(
         out_n[vv, uu] = n_cam
         filled += int(ok.sum())
     return out_d, out_n, filled, culled
+
+
+def _fill_front(
+    out_d: np.ndarray,
+    out_n: np.ndarray,
+    measured: np.ndarray,
+    cell_label: np.ndarray,
+    cell_measured: np.ndarray,
+    votes: np.ndarray,
+    found: np.ndarray,
+    ray: np.ndarray,
+    hits: np.ndarray,
+    centre: np.ndarray,
+    R: np.ndarray,
+    planes: list[Plane],
+    cell_px: int,
+    min_votes: int,
+    min_agreement: float,
+    depth_range: tuple[float, float],
+) -> int:
+    """Fill holes bounded by planes with the front-most of those planes (in place).
+
+    A hole cell qualifies when at least ``min_votes`` of its 8 nearest measured cells, and
+    ``min_agreement`` of those found, lie on some plane (any plane: a plain wall meets the
+    floor, another wall, the ceiling); a plain object before the wall is bounded by its own
+    edges, which lie off every plane, and is left empty. Each of its pixels
+    then takes, among the planes that bound it (its own measured label included), the one
+    its ray meets first inside the plane's extent: where two walls and the floor bound a
+    plain corner, every pixel lands on the surface it sees.
+
+    Returns:
+        The number of pixels filled.
+    """
+    h, w = out_d.shape
+    on_plane = votes.sum(0)
+    vote_ok = (on_plane >= min_votes) & (on_plane >= min_agreement * np.maximum(found, 1))
+    vote_ok &= ~(cell_measured & (cell_label < 0))
+    cand = (votes > 0) & vote_ok[None]
+    own = cell_label >= 0
+    if own.any():  # a cell measured on a plane may always fill its own holes with it
+        jj, ii, kk = cell_label[own], *np.nonzero(own)
+        cand[jj, ii, kk] = True
+    target = ~measured & np.repeat(np.repeat(cand.any(0), cell_px, 0), cell_px, 1)[:h, :w]
+    if not target.any():
+        return 0
+    v, u = np.nonzero(target)
+    flat = v * w + u
+    cand_px = cand[:, v // cell_px, u // cell_px]
+    z = np.where(cand_px, hits[:, flat], np.inf)
+    best = z.argmin(0)
+    zb = z[best, np.arange(len(flat))]
+    ok = np.isfinite(zb) & (zb > depth_range[0]) & (zb < depth_range[1])
+    filled = 0
+    for j, pl in enumerate(planes):
+        m = ok & (best == j)
+        if not m.any():
+            continue
+        n_cam = R @ (pl.normal if centre @ pl.normal + pl.offset > 0 else -pl.normal)
+        out_d[v[m], u[m]] = zb[m]
+        out_n[v[m], u[m]] = n_cam
+        filled += int(m.sum())
+    return filled
 
 
 def plane_fill(
@@ -528,10 +747,14 @@ def plane_fill(
         on = np.zeros(len(planes), np.int64)
         behind = np.zeros(len(planes), np.int64)
         hidden = np.zeros((len(planes), len(planes)), np.int64)
-        for name, K, R, t, _ in views[:: max(1, len(views) // 40)]:
+        support = np.zeros(len(planes), np.int64)
+        step = max(1, len(views) // 40)
+        for k, (name, K, R, t, _) in enumerate(views):
             a, b, c = plane_evidence(measured(name)[0], K, R, t, planes, cfg.label_distance_m,
                                      cfg.label_rel_distance)  # fmt: skip
-            on, behind, hidden = on + a, behind + b, hidden + c
+            support += a >= cfg.support_min_points
+            if k % step == 0:
+                on, behind, hidden = on + a, behind + b, hidden + c
         keep, dropped = validate_planes(planes, on, behind, hidden, cfg.max_seen_through,
                                         cfg.max_hidden)  # fmt: skip
         for j, why in dropped.items():
@@ -539,7 +762,23 @@ def plane_fill(
                      np.round(planes[j].normal, 2).tolist(), why)  # fmt: skip
         dropped = {j: f"normal {np.round(planes[j].normal, 3).tolist()}, offset "
                    f"{planes[j].offset:.3f}: {w}" for j, w in dropped.items()}  # fmt: skip
-        planes = [planes[j] for j in keep]
+        planes, support = [planes[j] for j in keep], support[keep]
+    if cfg.extent == "carved_hull" and planes:
+        samples = [(measured(name)[0], K, R, t) for name, K, R, t, _ in views]
+        for pl, ext in zip(planes, carved_hulls(planes, samples, cfg.label_distance_m,
+                                                cfg.label_rel_distance, cfg.carve_min_rays),
+                           strict=True):  # fmt: skip
+            pl.occupied = ext
+    if cfg.drop_phantoms and cfg.shadow_gap_m > 0 and planes:
+        shadows = shadow_planes(planes, support, cfg.shadow_gap_m, cfg.merge_angle_deg)
+        for j, why in shadows.items():
+            LOG.info("dense: plane %d (normal %s) dropped, %s", j,
+                     np.round(planes[j].normal, 2).tolist(), why)  # fmt: skip
+            dropped[len(dropped) + 1000 + j] = (
+                f"normal {np.round(planes[j].normal, 3).tolist()}, offset "
+                f"{planes[j].offset:.3f}: {why}"
+            )
+        planes = [p for j, p in enumerate(planes) if j not in shadows]
     LOG.info("dense: %d planes in %d voxel points", len(planes), len(cloud))
     per_view = []
     total_px = total_measured = total_filled = total_culled = 0
@@ -550,7 +789,7 @@ def plane_fill(
             distance_m=cfg.label_distance_m, rel_distance=cfg.label_rel_distance,
             cell_px=cfg.cell_px, max_gap_frac=cfg.max_gap_frac, min_votes=cfg.min_votes,
             min_agreement=cfg.min_agreement, extent_margin_m=cfg.extent_margin_m,
-            cull_behind=cfg.cull_behind,
+            cull_behind=cfg.cull_behind, bounding_planes=cfg.fill_rule == "bounding_planes",
         )  # fmt: skip
         write_array(ws.map_path(dense_dir, "depth", name, "geometric"), fd)
         write_array(ws.map_path(dense_dir, "normal", name, "geometric"), fn)

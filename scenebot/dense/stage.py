@@ -246,6 +246,7 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
         min_shared_points=cfg.min_shared_points,
         min_angle_deg=cfg.min_triangulation_angle_deg,
         depth_margin=cfg.depth_margin,
+        full_angle_deg=cfg.full_angle_deg,
     )
     if isolated and (not cfg.skip_isolated_views or not plans):
         raise ValueError(

@@ -34,11 +34,13 @@ class ViewPlan:
     depth_range: tuple[float, float]
 
 
-def _angle_weight(angle_deg: float, min_deg: float) -> float:
-    """Preference for triangulation angles: rises to 1 at 5 deg, falls beyond 30 deg."""
+def _angle_weight(angle_deg: float, min_deg: float, full_deg: float = 5.0) -> float:
+    """Preference for triangulation angles: rises as the square of the angle to 1 at
+    ``full_deg`` (depth precision grows with the baseline, and a pose error of a millimetre
+    is a large share of a short one), falls beyond 30 deg (appearance changes)."""
     if angle_deg < min_deg:
         return 0.0
-    w = min(angle_deg / 5.0, 1.0)
+    w = min(angle_deg / full_deg, 1.0) ** 2
     if angle_deg > 30.0:
         w *= 30.0 / angle_deg
     return w
@@ -51,6 +53,7 @@ def select_views(
     min_angle_deg: float = 1.0,
     depth_margin: float = 0.25,
     image_ids: list[int] | None = None,
+    full_angle_deg: float = 5.0,
 ) -> tuple[list[ViewPlan], list[str]]:
     """Choose source views and depth ranges for every registered image.
 
@@ -59,6 +62,8 @@ def select_views(
         num_sources: maximum sources per reference view.
         min_shared_points: minimum shared sparse points for a source.
         min_angle_deg: minimum median triangulation angle for a source, degrees.
+        full_angle_deg: a source's shared points count fully from this median angle on
+            (degrees); below it they are weighted by the square of the angle's share.
         depth_margin: the range [p1, p99] of sparse depths is widened to
             [p1 * (1 - margin), p99 * (1 + margin)].
         image_ids: reference views to plan (default: all registered images).
@@ -107,7 +112,7 @@ def select_views(
             b = P - centers[j]
             cosang = np.sum(a * b, 1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
             ang = float(np.degrees(np.median(np.arccos(np.clip(cosang, -1, 1)))))
-            w = _angle_weight(ang, min_angle_deg)
+            w = _angle_weight(ang, min_angle_deg, full_angle_deg)
             if w > 0:
                 scored.append((len(plist) * w, j, len(plist), ang))
         if not scored or len(pids) == 0:

@@ -69,6 +69,17 @@ class EvaluateConfig(BaseModel):
     validity_height: int = Field(
         240, ge=12, description="Score validity: height of the compared renders (pixels)."
     )
+    depth_maps: bool = Field(
+        True,
+        description="Evaluate every depth map of the dense workspace (measured and final) "
+        "against the true depth along its pixel rays (final evaluation only).",
+    )
+    depth_rel_tol: float = Field(
+        0.02, gt=0, lt=1, description="A depth is right within this share of the true depth."
+    )
+    depth_map_views: int = Field(
+        0, ge=0, description="Evaluate at most this many depth maps, evenly spread (0: all)."
+    )
     plots: bool = Field(True, description="Write the PNG pictures.")
 
     @field_validator("thresholds_m")

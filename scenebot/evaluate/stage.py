@@ -256,6 +256,13 @@ def run(
                 d_comp, surf.observable_weights, views,
                 sc.material_ids[surf.triangle[surf.observable]], sc.materials, ecfg.thresholds_m,
             )  # fmt: skip
+            dense_dir = Path(inputs.dense_cloud).parent
+            if ecfg.depth_maps and (dense_dir / "stereo").is_dir():
+                from scenebot.evaluate.depthmaps import evaluate_depth_maps
+
+                out["dense"]["depth_maps"] = evaluate_depth_maps(
+                    dense_dir, sim, sc, ecfg.depth_rel_tol, ecfg.depth_map_views
+                )
     elif inputs.dense_cloud is None:
         out["notes"].append("no dense cloud given: dense metrics skipped")
     out["seconds"] = time.perf_counter() - t0
@@ -274,7 +281,9 @@ def plot_evaluation(ev: dict, png: Path, surf=None, cloud: np.ndarray | None = N
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 3, figsize=(18, 9), dpi=100)
+    depth_maps = (ev.get("dense") or {}).get("depth_maps")
+    rows = 3 if depth_maps else 2
+    fig, axes = plt.subplots(rows, 3, figsize=(18, 4.5 * rows), dpi=100)
     sfm = ev.get("sfm") or {}
     ax = axes[0, 0]
     pe = np.array(sfm.get("per_photo_position_error_m", [])) * 100
@@ -340,12 +349,60 @@ def plot_evaluation(ev: dict, png: Path, surf=None, cloud: np.ndarray | None = N
     else:
         ax.set_axis_off()
     _plot_breakdown(axes[0, 2], axes[1, 2], (dense or {}).get("breakdown"))
+    if depth_maps:
+        _plot_depth_maps(axes[2, 0], axes[2, 1], axes[2, 2], depth_maps)
     fig.tight_layout()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(png)
     plt.close(fig)
     return png
+
+
+def _plot_depth_maps(ax_views, ax_mat, ax_text, dm: dict, top: int = 8) -> None:
+    """Per view: share of the pixels with a depth against the share of those right, for the
+    measured and the final maps, with the issue's bars; by material for the final maps."""
+    from scenebot.evaluate.depthmaps import COVERAGE_BAR, WITHIN_BAR
+
+    tol = None
+    for kind, color in (("measured", "tab:gray"), ("final", "tab:orange")):
+        pts = [(r[kind]["coverage"], r[kind]["accuracy"]) for r in dm["views"] if r.get(kind)]
+        if pts:
+            c, a = np.array(pts).T * 100
+            ax_views.scatter(c, a, s=8, color=color, label=f"{kind} ({len(pts)} views)")
+        tol = (dm["summary"].get(kind) or {}).get("bars", {}).get("rel_tol", tol)
+    ax_views.axvline(100 * COVERAGE_BAR, color="k", ls=":", lw=1)
+    ax_views.axhline(100 * WITHIN_BAR, color="k", ls=":", lw=1)
+    ax_views.set_xlim(0, 100)
+    ax_views.set_ylim(0, 100)
+    ax_views.set_xlabel("pixels with a depth (%)")
+    ax_views.set_ylabel(f"of those within {100 * (tol or 0.02):g}% of the true depth (%)")
+    ax_views.legend(loc="lower left", fontsize=8)
+    ax_views.set_title("depth maps, view by view (bars dotted)")
+    rows = (dm["by_material"].get("final") or [])[:top][::-1]
+    y = np.arange(len(rows))
+    ax_mat.barh(y + 0.2, [100 * r["with_depth"] for r in rows], 0.4, color="tab:orange",
+                label="pixels with a depth")  # fmt: skip
+    ax_mat.barh(y - 0.2, [100 * (r["within"] or 0) for r in rows], 0.4, color="tab:green",
+                label="of those right")  # fmt: skip
+    ax_mat.set_yticks(y, [f"{r['material']} ({100 * r['pixel_share']:.0f}% of pixels)"
+                          for r in rows], fontsize=8)  # fmt: skip
+    ax_mat.set_xlim(0, 105)
+    ax_mat.legend(loc="lower right", fontsize=8)
+    ax_mat.set_title("final depth maps by material")
+    lines = []
+    for kind, s in dm["summary"].items():
+        if not s:
+            continue
+        wk = next(k for k in s if k.startswith("within_") and k.endswith("_median"))
+        lines.append(
+            f"{kind}: {s['views']} views\n  pixels with a depth: median "
+            f"{100 * s['coverage_median']:.1f}%\n  of those right: median "
+            f"{100 * s[wk]:.1f}%\n  views meeting both bars: {s['views_meeting_bars']}"
+        )
+    ax_text.text(0.02, 0.98, "\n\n".join(lines), va="top", family="monospace", fontsize=10,
+                 transform=ax_text.transAxes)  # fmt: skip
+    ax_text.set_axis_off()
 
 
 def _plot_breakdown(ax_mat, ax_views, b: dict | None, tau: str = "2cm", top: int = 10) -> None:
@@ -418,6 +475,14 @@ def main_summary(ev: dict) -> str:
             lines.append(
                 f"{100 * b['photographed_share']:.0f}% of the observable area seen by >= 2 "
                 f"photos, {100 * (where or 0):.0f}% of it complete at 2 cm"
+            )
+        fin = ((d.get("depth_maps") or {}).get("summary") or {}).get("final")
+        if fin:
+            wk = next(k for k in fin if k.startswith("within_") and k.endswith("_median"))
+            lines.append(
+                f"final depth maps: median {100 * fin['coverage_median']:.0f}% of the pixels "
+                f"with a depth, {100 * fin[wk]:.0f}% of those right; "
+                f"{fin['views_meeting_bars']}/{fin['views']} views meet both bars"
             )
     if not math.isnan(ev.get("seconds", float("nan"))):
         lines.append(f"({ev['seconds']:.1f} s)")
