@@ -238,3 +238,22 @@ def test_a_shadow_plane_a_few_centimetres_off_is_dropped():
     why = shadow_planes(planes, support, max_gap_m=0.1)
     assert [depth[j] for j in why] == [2.94]
     assert shadow_planes(planes, support, max_gap_m=0.03) == {}  # 6 cm apart: both kept
+
+
+def test_a_hole_beside_an_objects_edge_is_left_empty_there():
+    """A plain strip of wall next to an object (measured, off every plane): the strip is
+    filled with the wall, but not within edge_px of the object, where the hole could as well
+    be the object's side."""
+    from scenebot.dense.planefill import carved_hulls
+
+    rng = np.random.default_rng(3)
+    d = wall()
+    d[:, 80:120] = rng.uniform(1.8, 2.2, (H, 40))  # an object before the wall
+    d[30:90, 68:80] = 0  # plain wall between them
+    planes = planes_of(d)
+    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)]), strict=True):
+        pl.occupied = ext
+    fd, _, filled, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), bounding_planes=True)
+    assert filled > 0
+    assert np.allclose(fd[40:80, 68:74], 3.0, atol=1e-3)  # the strip, away from the edge
+    assert np.all(fd[40:80, 77:80] == 0)  # within 3 px of the object: empty

@@ -631,6 +631,8 @@ def _fill_front(
     min_votes: int,
     min_agreement: float,
     depth_range: tuple[float, float],
+    edge_px: int = 3,
+    edge_rel: float = 0.05,
 ) -> int:
     """Fill holes bounded by planes with the front-most of those planes (in place).
 
@@ -638,21 +640,36 @@ def _fill_front(
     ``min_agreement`` of those found, lie on some plane (any plane: a plain wall meets the
     floor, another wall, the ceiling); a plain object before the wall is bounded by its own
     edges, which lie off every plane, and is left empty. Each of its pixels
-    then takes, among the planes that bound it (its own measured label included), the one
-    its ray meets first inside the plane's extent: where two walls and the floor bound a
-    plain corner, every pixel lands on the surface it sees.
+    then takes, among the boundary planes that bound it (its own measured label included),
+    the one its ray meets first inside the plane's extent: where two walls and the floor
+    bound a plain corner, every pixel lands on the surface it sees. An object's face (a
+    plane that is no boundary) fills only the cells it bounds by itself (``min_votes`` and
+    ``min_agreement`` of the found cells on it) or its own measured cells. A pixel within
+    ``edge_px`` of measured depth more than ``edge_rel`` nearer or farther than its fill
+    stays empty: beside an object's edge the hole may be either side of it.
 
     Returns:
         The number of pixels filled.
     """
     h, w = out_d.shape
+    boundary = np.array([pl.boundary for pl in planes])
     on_plane = votes.sum(0)
     vote_ok = (on_plane >= min_votes) & (on_plane >= min_agreement * np.maximum(found, 1))
     vote_ok &= ~(cell_measured & (cell_label < 0))
-    cand = (votes > 0) & vote_ok[None]
-    own = cell_label >= 0
-    if own.any():  # a cell measured on a plane may always fill its own holes with it
+    cand = (votes > 0) & vote_ok[None] & boundary[:, None, None]
+    own = (cell_label >= 0) & boundary[np.maximum(cell_label, 0)]
+    if own.any():  # a cell measured on a boundary plane may always fill its holes with it
         jj, ii, kk = cell_label[own], *np.nonzero(own)
+        cand[jj, ii, kk] = True
+    # an object's face (no boundary) fills only what it bounds alone, as with same_plane:
+    # at its edge the hole is more often the background its sources could not see
+    top, winner = votes.max(0), votes.argmax(0)
+    obj = np.where((cell_label >= 0) & ~boundary[np.maximum(cell_label, 0)], cell_label, -1)
+    alone = (top >= min_votes) & (top >= min_agreement * np.maximum(found, 1))
+    obj = np.where((obj < 0) & alone & ~boundary[winner] & ~cell_measured, winner, obj)
+    if (obj >= 0).any():
+        cand[:, obj >= 0] = False
+        jj, ii, kk = obj[obj >= 0], *np.nonzero(obj >= 0)
         cand[jj, ii, kk] = True
     target = ~measured & np.repeat(np.repeat(cand.any(0), cell_px, 0), cell_px, 1)[:h, :w]
     if not target.any():
@@ -664,6 +681,14 @@ def _fill_front(
     best = z.argmin(0)
     zb = z[best, np.arange(len(flat))]
     ok = np.isfinite(zb) & (zb > depth_range[0]) & (zb < depth_range[1])
+    if edge_px > 0:  # not beside measured depth off by more than edge_rel: an object's edge
+        import cv2
+
+        kernel = np.ones((2 * edge_px + 1, 2 * edge_px + 1), np.uint8)
+        d = np.where(measured, out_d, 0).astype(np.float32)
+        far = cv2.dilate(d, kernel)[v, u]
+        near = cv2.erode(np.where(measured, d, np.inf).astype(np.float32), kernel)[v, u]
+        ok &= (far <= zb * (1 + edge_rel)) & (near >= zb * (1 - edge_rel))
     filled = 0
     for j, pl in enumerate(planes):
         m = ok & (best == j)
