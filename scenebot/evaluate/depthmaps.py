@@ -104,20 +104,16 @@ def evaluate_depth_maps(
     Raises:
         FileNotFoundError: the workspace has no undistorted model or no depth maps.
     """
-    import open3d as o3d
     import pycolmap
 
     from scenebot.dense.colmap_io import read_array
+    from scenebot.dense.evaluate import mesh_raycaster
 
     dense_dir = Path(dense_dir)
     if not (dense_dir / "sparse" / "images.bin").is_file():
         raise FileNotFoundError(f"no undistorted model in {dense_dir / 'sparse'}")
     rec = pycolmap.Reconstruction(str(dense_dir / "sparse"))
-    rc = o3d.t.geometry.RaycastingScene()
-    rc.add_triangles(
-        o3d.core.Tensor(np.asarray(scene.vertices, np.float32)),
-        o3d.core.Tensor(np.asarray(scene.triangles, np.uint32)),
-    )
+    rc = mesh_raycaster(scene.vertices, scene.triangles)
     mats = np.asarray(scene.material_ids)
     names = [m.name for m in scene.materials]
 
