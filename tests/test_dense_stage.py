@@ -10,7 +10,7 @@ import pytest
 
 from scenebot.dense import stage
 from scenebot.dense import workspace as ws
-from scenebot.dense.colmap_io import read_array
+from scenebot.dense.colmap_io import read_array, write_array
 from scenebot.dense.config import DenseConfig
 from scenebot.dense.evaluate import depth_map_metrics, mesh_raycaster
 from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
@@ -141,3 +141,17 @@ def test_without_geometric_pass(capture, tmp_path):
     assert np.mean([x["coverage"] for x in m]) > 0.4
     assert np.mean([x["accuracy"] for x in m]) > 0.85
     assert not (out.dense_dir / "stereo" / "unfiltered").exists()
+
+
+def test_a_rerun_completes_its_own_depth_maps(capture, tmp_path):
+    """Re-run into the same workspace (the workflow re-runs the stage when a setting
+    changes): plane completion starts from this run's depth maps, not the measured maps an
+    earlier run left in stereo/depth_maps_measured."""
+    root, _, _, views = capture
+    out = stage.DenseOutputs(tmp_path / "dense")
+    inputs = stage.DenseInputs(root / "sparse", root / "images")
+    stage.run(_cfg(plots=False), inputs, out)
+    stale = out.dense_dir / "stereo" / "depth_maps_measured" / f"{views[0].name}.geometric.bin"
+    write_array(stale, np.zeros_like(read_array(stale)))  # an earlier run's map: empty
+    stage.run(_cfg(plots=False), inputs, out)
+    assert np.mean(read_array(stale) > 0) > 0.2

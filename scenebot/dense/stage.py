@@ -240,6 +240,10 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
     dense_dir = Path(outputs.dense_dir)
     ws.check_inputs(inputs.sparse_dir, inputs.image_dir)
     rec = ws.undistort(inputs.sparse_dir, inputs.image_dir, dense_dir, cfg.max_image_size)
+    # a re-run estimates every depth map again: the measured maps a previous run kept beside
+    # its plane-completed ones would otherwise be completed instead of the new ones
+    for kind in ("depth", "normal"):
+        shutil.rmtree(dense_dir / "stereo" / f"{kind}_maps_measured", ignore_errors=True)
     plans, isolated = select_views(
         rec,
         num_sources=cfg.num_source_views,
