@@ -257,3 +257,24 @@ def test_a_hole_beside_an_objects_edge_is_left_empty_there():
     assert filled > 0
     assert np.allclose(fd[40:80, 68:74], 3.0, atol=1e-3)  # the strip, away from the edge
     assert np.all(fd[40:80, 77:80] == 0)  # within 3 px of the object: empty
+
+
+def test_walls_are_snapped_upright_and_floors_flat():
+    """A wall measured 1.5 degrees off vertical (a few biased patches) stands upright after
+    snapping to the floor's normal, at its inliers' median offset; snap_deg 0 keeps it."""
+    rng = np.random.default_rng(4)
+    floor = np.c_[rng.uniform(0, 4, (3000, 2)), rng.normal(-0.35, 0.003, 3000)]
+    yz = np.c_[rng.uniform(0, 4, 3000), rng.uniform(-0.35, 2.2, 3000)]
+    tilt = np.tan(np.radians(1.5))
+    wallp = np.c_[3.0 + tilt * yz[:, 1] + rng.normal(0, 0.003, 3000), yz]
+    kw = dict(distance_m=0.02, min_share=0.05, cell_m=0.1)
+    raw = detect_planes(np.r_[floor, wallp], **kw)
+    snapped = detect_planes(np.r_[floor, wallp], snap_deg=3.0, **kw)
+    wall_raw = next(p for p in raw if abs(p.normal[0]) > 0.9)
+    wall_s = next(p for p in snapped if abs(p.normal[0]) > 0.9)
+    floor_s = next(p for p in snapped if abs(p.normal[2]) > 0.9)
+    assert abs(wall_raw.normal[2]) > np.sin(np.radians(1.0))  # fitted: tilted
+    assert wall_s.normal[2] == pytest.approx(0.0, abs=1e-9)  # snapped: upright
+    assert abs(floor_s.normal[2]) == pytest.approx(1.0, abs=1e-9)
+    x_mid = 3.0 + tilt * np.median(yz[:, 1])
+    assert abs(-wall_s.offset / wall_s.normal[0]) == pytest.approx(x_mid, abs=0.01)

@@ -178,6 +178,7 @@ def detect_planes(
     merge_angle_deg: float = 5.0,
     normals: np.ndarray | None = None,
     normal_deg: float = 30.0,
+    snap_deg: float = 0.0,
 ) -> list[Plane]:
     """Peel planes off a cloud by RANSAC, largest first.
 
@@ -200,6 +201,8 @@ def detect_planes(
         merge_angle_deg: planes closer in angle (and offset) are one.
         normals: (N, 3) unit normals of the points, or None.
         normal_deg: largest angle between a point's normal and its plane's.
+        snap_deg: planes within this angle (degrees) of horizontal or vertical are made
+            exactly so (:func:`_snap_plane`); 0: as fitted.
 
     Returns:
         The planes with their extents, largest first.
@@ -244,9 +247,12 @@ def detect_planes(
         rest = rest[~on]
         if rest_n is not None:
             rest_n = rest_n[~on]
+    up = _up_direction(found, fits, np.cos(np.radians(10.0))) if snap_deg else None
     planes: list[Plane] = []
     for sets, (n, d) in zip(found, fits, strict=True):
         inl = np.concatenate(sets)
+        if up is not None:
+            n, d = _snap_plane(n, d, inl, up, snap_deg)
         origin = inl.mean(0)
         e1 = np.cross(n, [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0])
         e1 /= np.linalg.norm(e1)
@@ -256,6 +262,40 @@ def detect_planes(
             planes.append(Plane(n, d, basis, origin, cell_m, lo, occ, len(inl)))
     planes.sort(key=lambda p: -p.inliers)
     return planes
+
+
+def _up_direction(
+    found: list[list[np.ndarray]], fits: list[tuple[np.ndarray, float]], cos_max: float
+) -> np.ndarray | None:
+    """The normal of the largest plane within ``arccos(cos_max)`` of the map's z axis (the
+    floor of a room), signed upwards; None when there is none."""
+    best, up = 0, None
+    for sets, (n, _) in zip(found, fits, strict=True):
+        size = sum(len(s) for s in sets)
+        if abs(n[2]) > cos_max and size > best:
+            best, up = size, n * np.sign(n[2])
+    return up
+
+
+def _snap_plane(
+    n: np.ndarray, d: float, inliers: np.ndarray, up: np.ndarray, snap_deg: float
+) -> tuple[np.ndarray, float]:
+    """A plane within ``snap_deg`` of horizontal (normal along ``up``) or of vertical
+    (normal perpendicular to it) made exactly so, its offset the median over its inliers.
+
+    Walls stand upright and floors lie flat: a wall fitted 1 degree off over its few
+    measured patches is 4 cm off at the top of a 2.6 m wall, which its plane completion
+    then repeats over the whole wall.
+    """
+    s = float(n @ up)
+    if abs(s) > np.cos(np.radians(snap_deg)):
+        n = up * np.sign(s)
+    elif abs(s) < np.sin(np.radians(snap_deg)):
+        n = n - s * up
+        n = n / np.linalg.norm(n)
+    else:
+        return n, d
+    return n, float(-np.median(inliers @ n))
 
 
 def backproject(depth: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -765,7 +805,7 @@ def plane_fill(
         cloud, cfg.ransac_distance_m, cfg.min_plane_share, cfg.max_planes, cfg.seed,
         cfg.extent_cell_m, cfg.extent_min_points, cfg.extent_close_cells, cfg.merge_angle_deg,
         normals=cloud_n if cfg.normal_deg is not None else None,
-        normal_deg=cfg.normal_deg or 90.0,
+        normal_deg=cfg.normal_deg or 90.0, snap_deg=cfg.snap_deg,
     )  # fmt: skip
     dropped: dict[int, str] = {}
     if cfg.drop_phantoms and planes:
