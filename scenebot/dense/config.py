@@ -158,8 +158,9 @@ class PlaneFillConfig(BaseModel):
         "bounding_planes",
         description="same_plane: a hole is filled with the plane most of its 8 nearest "
         "measured neighbours lie on; bounding_planes: a hole whose neighbours lie on planes "
-        "(any planes: wall, floor, another wall) is filled, each pixel with the bounding plane "
-        "its ray meets first.",
+        "(any planes: wall, floor, another wall) is filled, each pixel with the boundary plane "
+        "its ray meets first (boundaries are found by extent: carved_hull; with extent: "
+        "cells only an object face's same_plane fill remains).",
     )
     min_votes: int = Field(
         2, ge=1, le=8, description="Of the 8 directions, this many must find the same plane ..."
