@@ -42,6 +42,7 @@ is only fused where several views filled it alike. The measured maps are kept in
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -373,7 +374,7 @@ def plane_evidence(
 
 def carved_hulls(
     planes: list[Plane],
-    samples: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    samples: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
     distance_m: float = 0.02,
     rel_distance: float = 0.01,
     min_rays: int = 2,
@@ -829,7 +830,7 @@ def plane_fill(
                    f"{planes[j].offset:.3f}: {w}" for j, w in dropped.items()}  # fmt: skip
         planes, support = [planes[j] for j in keep], support[keep]
     if cfg.extent == "carved_hull" and planes:
-        samples = [(measured(name)[0], K, R, t) for name, K, R, t, _ in views]
+        samples = ((measured(name)[0], K, R, t) for name, K, R, t, _ in views)  # one at a time
         for pl, ext in zip(planes, carved_hulls(planes, samples, cfg.label_distance_m,
                                                 cfg.label_rel_distance, cfg.carve_min_rays),
                            strict=True):  # fmt: skip
