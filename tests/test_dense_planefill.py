@@ -278,3 +278,142 @@ def test_walls_are_snapped_upright_and_floors_flat():
     assert abs(floor_s.normal[2]) > np.cos(np.radians(0.2))
     x_mid = 3.0 + tilt * np.median(yz[:, 1])
     assert abs(-wall_s.offset / wall_s.normal[0]) == pytest.approx(x_mid, abs=0.01)
+
+
+def _ceiling_cloud(rng, n_ceiling=400, sigma=0.01, above=0):
+    """A room's thinned cloud: a large floor (z = -0.35), two walls, a desk's underside at
+    0.35 m (normals down), and only ``n_ceiling`` points of the ceiling at 2.25 m, seen in
+    one corner; ``above`` stray points higher up."""
+    floor = np.c_[rng.uniform(-3, 3, (20000, 2)), rng.normal(-0.35, 0.003, 20000)]
+    wall_x = np.c_[np.full(8000, 3.0), rng.uniform(-2.5, 2.5, 8000), rng.uniform(-0.35, 1.5, 8000)]
+    desk = np.c_[rng.uniform(-1, 0, (600, 2)), rng.normal(0.35, 0.003, 600)]
+    ceil = np.c_[rng.uniform(1.5, 3, (n_ceiling, 2)), rng.normal(2.25, sigma, n_ceiling)]
+    stray = np.c_[rng.uniform(-3, 3, (above, 2)), rng.uniform(2.6, 3.5, above)]
+    pts = np.r_[floor, wall_x, desk, ceil, stray]
+    up, side = np.array([0.0, 0.0, 1.0]), np.array([-1.0, 0.0, 0.0])
+    nrm = np.r_[np.tile(up, (20000, 1)), np.tile(side, (8000, 1)), np.tile(-up, (600, 1)),
+                np.tile(-up, (n_ceiling, 1)), np.tile(-up, (above, 1))]  # fmt: skip
+    return pts, nrm
+
+
+def test_the_ceiling_is_found_from_few_points_and_spans_the_floor():
+    """400 noisy ceiling points in a cloud of 29,000 are too few a share for RANSAC; the
+    ceiling search finds them at the highest dense height (not the desk's underside), at
+    the peak of their noise, and widens the ceiling to the floor's extent."""
+    from scenebot.dense.planefill import find_ceiling, span_floor
+
+    rng = np.random.default_rng(5)
+    pts, nrm = _ceiling_cloud(rng, sigma=0.015)
+    planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
+    assert not any(abs(p.normal[2]) > 0.9 and -p.offset * p.normal[2] > 2 for p in planes)
+    cams = np.c_[rng.uniform(-2, 2, (20, 2)), np.zeros(20)]
+    ceiling = find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, 100, 0.1, 3, 2)
+    assert ceiling is not None
+    assert -ceiling.offset / ceiling.normal[2] == pytest.approx(2.25, abs=0.006)
+    middle = np.array([[0.0, 0.0, 2.25]])
+    assert not ceiling.inside(middle)[0]  # its own points: one corner only
+    floor = next(p for p in planes if abs(p.normal[2]) > 0.9 and p.inliers > 10000)
+    span_floor(ceiling, floor)
+    assert ceiling.inside(middle)[0] and ceiling.inside(np.array([[-2.5, -2.5, 2.25]]))[0]
+    assert not ceiling.inside(np.array([[5.0, 5.0, 2.25]]))[0]
+
+
+def test_no_ceiling_without_its_points_or_with_depth_above_it():
+    from scenebot.dense.planefill import find_ceiling
+
+    rng = np.random.default_rng(6)
+    cams = np.zeros((5, 3))
+    for n_ceiling, above in ((0, 0), (40, 0), (400, 300)):
+        pts, nrm = _ceiling_cloud(rng, n_ceiling=n_ceiling, above=above)
+        planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
+        # (the desk underside, below it all, is never taken for the ceiling)
+        assert find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, 100, 0.1, 3, 2) is None
+
+
+def test_of_two_shadow_planes_with_as_many_views_the_one_with_fewer_points_goes():
+    from scenebot.dense.planefill import shadow_planes
+
+    wall_pts = backproject(wall(3.0), K, R, T).reshape(-1, 3)
+    shadow_pts = backproject(wall(2.97), K, R, T).reshape(-1, 3)[::3]
+    planes = detect_planes(np.r_[wall_pts, shadow_pts], distance_m=0.01, min_share=0.05)
+    assert len(planes) == 2
+    depth = [round(-p.offset / p.normal[2], 2) for p in planes]
+    why = shadow_planes(planes, np.array([50, 50]), max_gap_m=0.1)
+    assert [depth[j] for j in why] == [2.97]
+
+
+def test_an_object_face_the_view_sees_through_neither_culls_nor_fills_it():
+    """A box face's plane (no boundary) whose extent reaches across this view at 1 m, where
+    the view measured the wall at 3 m through it: the face is wrong here (the camera stands
+    beside the box), so the wall's depth is kept, not culled."""
+    d = wall()
+    face = detect_planes(backproject(wall(1.0), K, R, T).reshape(-1, 3), distance_m=0.01,
+                         min_share=0.05)  # fmt: skip
+    assert len(face) == 1 and not face[0].boundary
+    kept, _, _, culled = fill_view(d, NORMAL, K, R, T, face, (0.5, 10.0), bounding_planes=True)
+    assert culled == 0 and np.array_equal(kept, d)
+    _, _, _, culled = fill_view(d, NORMAL, K, R, T, face, (0.5, 10.0), bounding_planes=True,
+                                max_seen_through=None)  # fmt: skip
+    assert culled == d.size  # without the check the whole view is culled
+
+
+def test_any_boundary_fills_a_plain_ceiling_above_the_wall():
+    """The wall z = 3 m is measured only in its lower half; above it, the plain wall and then
+    the plain ceiling (y = -1 m, camera y down) have no depth, and no measured neighbour lies
+    on the ceiling. Taking any boundary plane the ray meets first fills the ceiling rows with
+    the ceiling; taking only the neighbours' planes leaves them empty."""
+    v = np.mgrid[0:H, 0:W][0] + 0.5
+    ray_y = (v - K[1, 2]) / K[1, 1]
+    with np.errstate(divide="ignore"):
+        ceil_z = np.where(ray_y < 0, -1.0 / ray_y, np.inf)
+    truth = np.minimum(ceil_z, 3.0).astype(np.float32)
+    planes = detect_planes(backproject(truth, K, R, T).reshape(-1, 3), distance_m=0.01,
+                           min_share=0.05)  # fmt: skip
+    assert len(planes) == 2
+    for p in planes:
+        p.boundary = True
+    d = truth.copy()
+    d[:70] = 0  # plain above row 70 (the ceiling line is at row 27)
+    kw = dict(bounding_planes=True, max_seen_through=None)
+    nb, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0), **kw)
+    anyb, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0), any_boundary=True, **kw)
+    rows = slice(5, 22)  # the ceiling, away from its line with the wall
+    assert np.all(nb[rows] == 0)
+    assert (anyb[rows] > 0).mean() > 0.9
+    got = anyb[rows] > 0
+    assert np.allclose(anyb[rows][got], truth[rows][got], rtol=1e-3)
+    assert np.allclose(anyb[30:70][anyb[30:70] > 0], 3.0, atol=1e-3)  # the wall stays the wall
+
+
+def test_a_second_pass_spreads_a_wall_fill_its_first_pass_could_not_reach():
+    """A wall measured only in a band at the bottom: cells far above it find measured depth
+    in too few directions in the first pass; the second counts the first pass's fill."""
+    d = wall()
+    d[:90] = 0
+    planes = planes_of(wall())
+    planes[0].boundary = True
+    one, n1, f1, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), bounding_planes=True)
+    two, _, f2, _ = fill_view(one, n1, K, R, T, planes, (0.5, 10.0), bounding_planes=True)
+    assert f1 > 0 and f2 > 0
+    assert (two > 0).sum() == (d > 0).sum() + f1 + f2
+    assert np.allclose(two[two > 0], 3.0, atol=1e-3)
+
+
+def test_fill_behind_a_surface_other_views_measured_is_emptied():
+    """The wall fill spread across a plain box face 1 m before it; other views measured the
+    box's texture (the cloud): the fill behind it is emptied, the rest kept; a single stray
+    point does not empty anything."""
+    from scenebot.dense.planefill import occluded_fill
+
+    d = wall()
+    filled = np.ones_like(d, bool)
+    rng = np.random.default_rng(7)
+    box = np.c_[rng.uniform(-0.5, 0.5, (4000, 2)), np.full(4000, 2.0)]  # x, y at z = 2 m
+    bad = occluded_fill(d, filled, K, R, T, box)
+    v, u = np.mgrid[0:H, 0:W] + 0.5
+    inside = (np.abs((u - W / 2) / F * 2.0) < 0.45) & (np.abs((v - H / 2) / F * 2.0) < 0.45)
+    outside = (np.abs((u - W / 2) / F * 2.0) > 0.6) | (np.abs((v - H / 2) / F * 2.0) > 0.6)
+    assert bad[inside].all() and not bad[outside].any()
+    stray = np.array([[0.0, 0.0, 2.0]])
+    assert not occluded_fill(d, filled, K, R, T, stray).any()
+    assert not occluded_fill(d, ~filled, K, R, T, box).any()  # measured pixels stay

@@ -116,6 +116,14 @@ class PlaneFillConfig(BaseModel):
         description="Smallest plane, as a share of the voxel points, that is used.",
     )
     max_planes: int = Field(24, ge=1, description="At most this many planes.")
+    ceiling_min_points: int = Field(
+        100,
+        ge=0,
+        description="The ceiling, seen by a level camera in its photos' top rows only, is "
+        "too small a share for RANSAC: it is found as the highest height above every camera "
+        "where this many voxel points with vertical normals lie, nothing measured above it, "
+        "and it spans the floor's extent; 0: no ceiling search.",
+    )
     extent_cell_m: float = Field(
         0.1, gt=0, description="Cell (m) of the raster that holds a plane's extent."
     )
@@ -161,6 +169,27 @@ class PlaneFillConfig(BaseModel):
         "(any planes: wall, floor, another wall) is filled, each pixel with the boundary plane "
         "its ray meets first (boundaries are found by extent: carved_hull; with extent: "
         "cells only an object face's same_plane fill remains).",
+    )
+    fill_planes: Literal["neighbours", "any_boundary"] = Field(
+        "any_boundary",
+        description="bounding_planes: the planes a hole's pixel may take, front-most first: "
+        "neighbours, the boundary planes its measured neighbours lie on; any_boundary, any "
+        "boundary of the room its ray meets (a plain ceiling above plain walls, where no "
+        "neighbour lies on the ceiling).",
+    )
+    passes: int = Field(
+        3,
+        ge=1,
+        le=5,
+        description="Fill passes: each later pass counts the earlier fill as measured, so a "
+        "plain wall's fill spreads across the cells whose neighbours the first pass lacked.",
+    )
+    occlusion_min_points: int = Field(
+        4,
+        ge=0,
+        description="Empty again the filled pixels behind at least this many points of the "
+        "measured depth of all views projected into the view's cell (cell_px; a plain object "
+        "that the fill spread across, whose texture other views measured); 0: no check.",
     )
     min_votes: int = Field(
         2, ge=1, le=8, description="Of the 8 directions, this many must find the same plane ..."

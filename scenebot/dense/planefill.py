@@ -16,23 +16,35 @@ carpet). This step, between depth estimation and fusion:
    another plane (a slice beneath the floor from a repeating carpet), and shadows: of two
    parallel planes a few centimetres apart (``shadow_gap_m``), the one fewer views support
    (a circle of photos registered 0.2 degrees off puts its wall a few cm in front of itself).
+   The ceiling, which a level camera sees only in its photos' top rows, at grazing angles,
+   is too small a share of the cloud for RANSAC: it is found as the highest dense height of
+   the points with vertical normals, above every camera, with nothing measured above it
+   (``ceiling_min_points``, :func:`find_ceiling`), and it spans the floor's extent.
 2. **Extents** (``extent: carved_hull``): the room's boundary planes (walls, floor, ceiling:
    almost nothing measured past them) span the convex hull of their cells, less the cells
    that measured depth is seen through (a doorway). A plain wall then reaches between its
    posters and corners; a box face keeps its own cells (:func:`carved_hulls`).
 3. **Labels**: a measured pixel carries the label of the plane it lies on (within
-   ``distance_m`` or ``rel_distance`` of its depth), or "off-plane".
+   ``distance_m`` or ``rel_distance`` of its depth), or "off-plane". An object's face that
+   this view sees through (more of its measured depth behind the face than on it) is wrong
+   in this view and is not used in it.
 4. **Votes**: on a grid of ``cell_px`` cells, every cell without measured depth looks along 8
    directions, up to ``max_gap_frac`` of the image width, for the nearest cell with measured
    depth. With ``fill_rule: bounding_planes`` it is filled when at least ``min_votes`` of the
    found cells, and at least ``min_agreement`` of them, lie on planes, and each of its pixels
-   takes the bounding plane its ray meets first (a plain corner between two walls and the
-   floor); with ``same_plane`` they must all carry the same plane label. Either way one
+   takes the boundary plane its ray meets first (a plain corner between two walls and the
+   floor; with ``fill_planes: any_boundary`` any boundary, so a plain ceiling above plain
+   walls too); with ``same_plane`` they must all carry the same plane label. Either way one
    bounded by something nearer (a plain cabinet face before a wall) is not filled, because
    its nearest measured neighbours are the cabinet's edges, off every plane.
 5. **Fill**: each hole pixel of a filled cell gets the depth where its ray meets the plane
    (in front of the camera, inside the plane's extent grown by ``extent_margin_m``, within the
-   view's depth range) and the plane's normal, turned towards the camera.
+   view's depth range) and the plane's normal, turned towards the camera. ``passes`` repeat
+   the votes and fill with the fill counted as measured: a plain wall's fill spreads to the
+   cells whose neighbours the first pass lacked.
+6. **Occlusion**: a filled pixel behind the depth that all views measured, projected into
+   this view (``occlusion_min_points`` in its cell), lies behind a surface (a plain object
+   the fill spread across) and is emptied again (:func:`occluded_fill`).
 
 Fusion then needs the usual agreement of ``dense.fusion_min_num_pixels`` views, so a plane
 is only fused where several views filled it alike. The measured maps are kept in
@@ -299,6 +311,108 @@ def _snap_plane(
     return n, float(-np.median(inliers @ n))
 
 
+def find_ceiling(
+    points: np.ndarray,
+    normals: np.ndarray,
+    planes: list[Plane],
+    centres: np.ndarray,
+    distance_m: float,
+    normal_deg: float,
+    min_points: int,
+    cell_m: float,
+    min_cell_points: int,
+    close_cells: int,
+    max_beyond: float = 0.25,
+    above_m: float = 0.1,
+) -> Plane | None:
+    """The room's ceiling, from the few points a level camera measures on it.
+
+    A camera at robot height sees the ceiling only in the top rows of its photos, at
+    grazing angles from metres away: a few thousand measured pixels over a whole campaign,
+    too few for RANSAC's share of the cloud, though the ceiling is a sixth of the room's
+    surface. Indoors it is the highest horizontal surface, and nothing lies above it: the
+    ceiling is the highest height (along the floor's normal, above every camera) where at
+    least ``min_points`` points whose normals are vertical within ``normal_deg`` lie within
+    ``distance_m``, with fewer points measured more than ``above_m`` above it than
+    ``max_beyond`` times those within ``above_m`` of it (grazing rays from metres away put
+    its points a few cm off).
+
+    Args:
+        points, normals: (N, 3) the thinned cloud and its unit normals.
+        planes: the planes found so far; the largest near-horizontal one is the floor.
+        centres: (V, 3) camera centres.
+        distance_m: inlier distance (m).
+        normal_deg: largest angle between a point's normal and the vertical.
+        min_points: fewest inliers of a ceiling.
+        cell_m, min_cell_points, close_cells: its extent raster (:func:`plane_extent`).
+        max_beyond: share of the points around it that may lie above it (outliers).
+        above_m: how far above it a point counts as above.
+
+    Returns:
+        The ceiling plane (its normal the floor's), or None when there is no floor, no
+        height holds enough points, depth was measured above it, or RANSAC found it.
+    """
+    floors = [p for p in planes if abs(p.normal[2]) > np.cos(np.radians(10.0))]
+    if not floors or len(points) == 0 or len(centres) == 0:
+        return None
+    floor = max(floors, key=lambda p: p.inliers)
+    n = floor.normal
+    up = n if np.median(centres @ n + floor.offset) > 0 else -n
+    top = float((centres @ up).max()) + distance_m
+    cos_n = np.cos(np.radians(normal_deg))
+    h = points @ up
+    vertical = np.abs(normals @ up) > cos_n
+    cand = vertical & (h > top)
+    if cand.sum() < min_points:
+        return None
+    # the highest height holding min_points vertical-normal points within distance_m
+    hs = np.sort(h[cand])
+    lo_i = np.searchsorted(hs, hs - distance_m, "left")
+    hi_i = np.searchsorted(hs, hs + distance_m, "right")
+    count = hi_i - lo_i
+    dense = np.flatnonzero(count >= min_points)
+    if not len(dense):
+        return None
+    k = dense[-1]
+    # the densest height within above_m below the highest dense one: the peak, not its edge
+    near = dense[hs[dense] > hs[k] - above_m]
+    height = float(hs[near[np.argmax(count[near])]])
+    inl = cand & (np.abs(h - height) < distance_m)
+    height = float(np.median(h[inl]))
+    inl = cand & (np.abs(h - height) < distance_m)
+    if int((h > height + above_m).sum()) > max_beyond * int((np.abs(h - height) <= above_m).sum()):
+        return None  # measured depth above it: not the room's top
+    for p in planes:  # RANSAC found it already
+        if abs(p.normal @ up) > cos_n and float(p.origin @ up) > height - above_m:
+            return None
+    x = points[inl]
+    origin = x.mean(0)
+    origin = origin - (origin @ up - height) * up
+    basis = floor.basis.copy()  # the floor's raster axes: span_floor maps cell to cell
+    lo, occ = plane_extent((x - origin) @ basis.T, cell_m, min_cell_points, close_cells)
+    return Plane(up.copy(), -height, basis, origin, cell_m, lo, occ, int(inl.sum()))
+
+
+def span_floor(ceiling: Plane, floor: Plane) -> None:
+    """Widen a ceiling's extent (in place) by its floor's, projected up: the ceiling of a
+    room spans its floor, though the camera saw only patches of it."""
+    from scipy.ndimage import binary_closing
+
+    cells = np.argwhere(floor.occupied)
+    if not len(cells):
+        return
+    X = floor.origin + (floor.lo + (cells + 0.5) * floor.cell_m) @ floor.basis
+    X = X - np.outer(X @ ceiling.normal + ceiling.offset, ceiling.normal)  # onto the ceiling
+    own = np.argwhere(ceiling.occupied)
+    Y = ceiling.origin + (ceiling.lo + (own + 0.5) * ceiling.cell_m) @ ceiling.basis
+    p2 = ceiling.to_2d(np.concatenate([X, Y]))
+    lo = np.minimum(p2.min(0) - ceiling.cell_m, ceiling.lo)
+    ij = np.floor((p2 - lo) / ceiling.cell_m).astype(np.int64)
+    occ = np.zeros(ij.max(0) + 2, bool)
+    occ[ij[:, 0], ij[:, 1]] = True
+    ceiling.lo, ceiling.occupied = lo, binary_closing(occ, iterations=1) | occ
+
+
 def backproject(depth: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(H, W) z-depth -> (H, W, 3) world points (COLMAP pixel centres at +0.5)."""
     h, w = depth.shape
@@ -470,7 +584,8 @@ def shadow_planes(
     A handful of views whose poses are slightly off (a turn-in-place circle registered with a
     0.2 degree error between its photos) put the wall they see a few centimetres in front of
     where every other view puts it, and RANSAC finds that shadow as a plane of its own,
-    parallel to the wall and as large in points. The wall is the one more views support.
+    parallel to the wall and as large in points. The wall is the one more views support
+    (of two that as many views support, the one with more points).
 
     Args:
         planes: the planes, with their extents.
@@ -484,15 +599,18 @@ def shadow_planes(
     """
     why: dict[int, str] = {}
     cos_par = np.cos(np.radians(max_angle_deg))
-    order = sorted(range(len(planes)), key=lambda j: -support[j])
+    order = sorted(range(len(planes)), key=lambda j: (-support[j], -planes[j].inliers))
     for a, i in enumerate(order):
         if i in why:
             continue
         pi = planes[i]
         for j in order[a + 1 :]:
             pj = planes[j]
-            if j in why or support[j] >= support[i] or abs(pi.normal @ pj.normal) < cos_par:
-                continue  # (as many views on both: no telling which is the surface)
+            weaker = support[j] < support[i] or (
+                support[j] == support[i] and pj.inliers < pi.inliers
+            )  # as many views on both: the one with more points is the surface
+            if j in why or not weaker or abs(pi.normal @ pj.normal) < cos_par:
+                continue
             gap = abs(pj.origin @ pi.normal + pi.offset)
             if gap > max_gap_m:
                 continue
@@ -507,17 +625,21 @@ def shadow_planes(
 
 def validate_planes(
     planes: list[Plane], on: np.ndarray, behind: np.ndarray, hidden: np.ndarray,
-    max_seen_through: float, max_hidden: float,
+    max_seen_through: float, max_hidden: float, not_hidden: Iterable[int] = (),
 ) -> tuple[list[int], dict[int, str]]:  # fmt: skip
     """Planes kept (indices) and why the others were dropped: first those seen through
     (``behind > max_seen_through * on``), then, among the rest, those whose points mostly
-    lie behind another kept plane (``hidden > max_hidden * on``)."""
+    lie behind another kept plane (``hidden > max_hidden * on``), except ``not_hidden``
+    (the ceiling: its few points lie at the walls' top edges, where a wall's extent closed
+    over a gap hides them)."""
     why: dict[int, str] = {}
     for j in range(len(planes)):
         if behind[j] > max_seen_through * max(on[j], 1):
             why[j] = f"seen through: {behind[j]} measured points behind it, {on[j]} on it"
     kept = [j for j in range(len(planes)) if j not in why]
     for j in list(kept):
+        if j in set(not_hidden):
+            continue
         others = [k for k in kept if k != j]
         worst = max((hidden[j, k] for k in others), default=0)
         if worst > max_hidden * max(on[j], 1):
@@ -543,12 +665,21 @@ def fill_view(
     extent_margin_m: float = 0.05,
     cull_behind: bool = True,
     bounding_planes: bool = False,
+    max_seen_through: float | None = 1.0,
+    any_boundary: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Fill one view's holes from the planes (see the module docstring).
 
     With ``cull_behind``, measured depth that lies behind a plane's extent along its ray
     (beyond ``2 * distance_m`` and ``rel_distance``: a match through the floor on a
     repeating carpet) is removed first.
+
+    An object's face (a plane that is no boundary of the room) that this view sees through
+    (more of its measured pixels lie behind the face's extent than ``max_seen_through``
+    times those on it) is wrong here, whatever the other views say: the camera stands
+    where the face's extent was closed over a gap, and sees past it. Such a plane neither
+    culls nor fills this view. The room's boundaries (walls, floor) are not checked:
+    nothing is measured past them, and depth behind them is an outlier. None: no check.
 
     Returns:
         The depth and normal maps with the filled pixels, the number filled and the number
@@ -579,11 +710,27 @@ def fill_view(
             hits_fill[j, okf] = z[okf]
         ok[ok] = pl.inside(centre + z[ok, None] * ray[ok])
         hits[j, ok] = z[ok]
+    flat_d = depth.reshape(-1)
+    flat_m = measured.reshape(-1)
+    seen_through: set[int] = set()
+    if max_seen_through is not None:  # planes this view sees through are not used in it
+        X = centre + flat_d[flat_m, None] * ray[flat_m]
+        tol = np.maximum(distance_m, rel_distance * flat_d[flat_m])
+        for j, pl in enumerate(planes):
+            if pl.boundary:  # nothing is measured past a wall or floor: depth there is wrong
+                continue
+            n_on = int((np.abs(X @ pl.normal + pl.offset) < tol).sum())
+            n_behind = int((hits[j, flat_m] < flat_d[flat_m] * (1 - rel_distance)
+                            - 2 * distance_m).sum())  # fmt: skip
+            if n_behind > max_seen_through * max(n_on, 1):
+                seen_through.add(j)
+                hits[j] = np.inf
+                if hits_fill is not None:
+                    hits_fill[j] = np.inf
     culled = 0
     if cull_behind:
         # measured depth behind a plane's extent (seen through the floor): an outlier
-        flat_d = depth.reshape(-1)
-        behind = measured.reshape(-1) & (hits.min(0) < flat_d * (1 - rel_distance) - 2 * distance_m)
+        behind = flat_m & (hits.min(0) < flat_d * (1 - rel_distance) - 2 * distance_m)
         culled = int(behind.sum())
         if culled:
             depth = depth.copy()
@@ -615,7 +762,7 @@ def fill_view(
     if bounding_planes:
         filled = _fill_front(out_d, out_n, measured, cell_label, cell_measured, votes, found,
                              ray, hits_fill, centre, R, planes, cell_px, min_votes,
-                             min_agreement, (lo, hi))  # fmt: skip
+                             min_agreement, (lo, hi), any_boundary=any_boundary)  # fmt: skip
         return out_d, out_n, filled, culled
     winner = votes.argmax(0)
     top = votes.max(0)
@@ -633,7 +780,7 @@ def fill_view(
     filled = 0
     for j, pl in enumerate(planes):
         m = px_label[v, u] == j
-        if not m.any():
+        if not m.any() or j in seen_through:
             continue
         z = -(centre @ pl.normal + pl.offset) / (ray[m] @ pl.normal)
         ok = np.isfinite(z) & (z > lo) & (z < hi) & (np.abs(ray[m] @ pl.normal) > 0.1)
@@ -674,6 +821,7 @@ def _fill_front(
     depth_range: tuple[float, float],
     edge_px: int = 3,
     edge_rel: float = 0.05,
+    any_boundary: bool = False,
 ) -> int:
     """Fill holes bounded by planes with the front-most of those planes (in place).
 
@@ -697,7 +845,10 @@ def _fill_front(
     on_plane = votes.sum(0)
     vote_ok = (on_plane >= min_votes) & (on_plane >= min_agreement * np.maximum(found, 1))
     vote_ok &= ~(cell_measured & (cell_label < 0))
-    cand = (votes > 0) & vote_ok[None] & boundary[:, None, None]
+    if any_boundary:  # any boundary plane the ray meets (a plain ceiling above the walls)
+        cand = np.broadcast_to(vote_ok[None] & boundary[:, None, None], votes.shape).copy()
+    else:  # only the boundary planes among the neighbours' labels
+        cand = (votes > 0) & vote_ok[None] & boundary[:, None, None]
     own = (cell_label >= 0) & boundary[np.maximum(cell_label, 0)]
     if own.any():  # a cell measured on a boundary plane may always fill its holes with it
         jj, ii, kk = cell_label[own], *np.nonzero(own)
@@ -740,6 +891,58 @@ def _fill_front(
         out_n[v[m], u[m]] = n_cam
         filled += int(m.sum())
     return filled
+
+
+def occluded_fill(
+    depth: np.ndarray,
+    filled: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    cloud: np.ndarray,
+    cell_px: int = 4,
+    rel: float = 0.05,
+    margin_m: float = 0.04,
+    min_points: int = 4,
+) -> np.ndarray:
+    """Filled pixels that lie behind depth measured by the views together.
+
+    A plain object's face whose edges no view measured well is bounded by the plane fill
+    of the wall or floor behind it, and a later pass spreads that fill across the object.
+    Other views, from elsewhere, often measured the object's texture. The measured cloud
+    of all views (thinned) is projected into this view, and a filled pixel with at least
+    ``min_points`` measured points in its ``cell_px`` cell nearer than its fill (by ``rel``
+    of the depth and ``margin_m``) is behind a measured surface: the fill is wrong there.
+
+    Returns:
+        (H, W) bool: the filled pixels to empty again.
+    """
+    h, w = depth.shape
+    out = np.zeros((h, w), bool)
+    if not filled.any() or len(cloud) == 0:
+        return out
+    xc = cloud @ R.T + t
+    z = xc[:, 2]
+    ok = z > 1e-3
+    u = K[0, 0] * xc[ok, 0] / z[ok] + K[0, 2]
+    v = K[1, 1] * xc[ok, 1] / z[ok] + K[1, 2]
+    z = z[ok]
+    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    if not ok.any():
+        return out
+    hc, wc = -(-h // cell_px), -(-w // cell_px)
+    cell = (v[ok] // cell_px).astype(np.int64) * wc + (u[ok] // cell_px).astype(np.int64)
+    z = z[ok]
+    order = np.lexsort((z, cell))
+    cell, z = cell[order], z[order]
+    first = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+    k = first + min_points - 1  # the min_points-th nearest point of each cell
+    has = k < np.r_[first[1:], len(cell)]
+    near = np.full(hc * wc, np.inf)
+    near[cell[first[has]]] = z[k[has]]
+    near = near.reshape(hc, wc)
+    near_px = np.repeat(np.repeat(near, cell_px, 0), cell_px, 1)[:h, :w]
+    return filled & (depth * (1 - rel) - margin_m > near_px)
 
 
 def plane_fill(
@@ -808,6 +1011,18 @@ def plane_fill(
         normals=cloud_n if cfg.normal_deg is not None else None,
         normal_deg=cfg.normal_deg or 90.0, snap_deg=cfg.snap_deg,
     )  # fmt: skip
+    ceiling = None
+    if cfg.ceiling_min_points and planes:
+        centres = np.array([-R.T @ t for _, _, R, t, _ in views])
+        ceiling = find_ceiling(
+            cloud, cloud_n, planes, centres, cfg.ransac_distance_m, cfg.normal_deg or 30.0,
+            cfg.ceiling_min_points, cfg.extent_cell_m, cfg.extent_min_points,
+            cfg.extent_close_cells,
+        )  # fmt: skip
+        if ceiling is not None:
+            LOG.info("dense: ceiling at %.3f m along %s from %d points", -ceiling.offset,
+                     np.round(ceiling.normal, 3).tolist(), ceiling.inliers)  # fmt: skip
+            planes.append(ceiling)
     dropped: dict[int, str] = {}
     if cfg.drop_phantoms and planes:
         on = np.zeros(len(planes), np.int64)
@@ -821,8 +1036,10 @@ def plane_fill(
             support += a >= cfg.support_min_points
             if k % step == 0:
                 on, behind, hidden = on + a, behind + b, hidden + c
-        keep, dropped = validate_planes(planes, on, behind, hidden, cfg.max_seen_through,
-                                        cfg.max_hidden)  # fmt: skip
+        keep, dropped = validate_planes(
+            planes, on, behind, hidden, cfg.max_seen_through, cfg.max_hidden,
+            not_hidden=[j for j, p in enumerate(planes) if p is ceiling],
+        )  # fmt: skip
         for j, why in dropped.items():
             LOG.info("dense: plane %d (normal %s) dropped, %s", j,
                      np.round(planes[j].normal, 2).tolist(), why)  # fmt: skip
@@ -835,6 +1052,11 @@ def plane_fill(
                                                 cfg.label_rel_distance, cfg.carve_min_rays),
                            strict=True):  # fmt: skip
             pl.occupied = ext
+        if ceiling is not None and any(p is ceiling for p in planes) and ceiling.boundary:
+            level = [p for p in planes if p is not ceiling and p.boundary
+                     and abs(p.normal @ ceiling.normal) > 0.999]  # fmt: skip
+            if level:  # the floor: the largest boundary plane parallel to the ceiling
+                span_floor(ceiling, max(level, key=lambda p: p.inliers))
     if cfg.drop_phantoms and cfg.shadow_gap_m > 0 and planes:
         shadows = shadow_planes(planes, support, cfg.shadow_gap_m, cfg.merge_angle_deg)
         for j, why in shadows.items():
@@ -850,13 +1072,26 @@ def plane_fill(
     total_px = total_measured = total_filled = total_culled = 0
     for name, K, R, t, rng_d in tqdm(views, desc="plane fill", unit="view", disable=not progress):
         d, n = measured(name)
-        fd, fn, filled, culled = fill_view(
-            d, n, K, R, t, planes, rng_d,
-            distance_m=cfg.label_distance_m, rel_distance=cfg.label_rel_distance,
-            cell_px=cfg.cell_px, max_gap_frac=cfg.max_gap_frac, min_votes=cfg.min_votes,
-            min_agreement=cfg.min_agreement, extent_margin_m=cfg.extent_margin_m,
-            cull_behind=cfg.cull_behind, bounding_planes=cfg.fill_rule == "bounding_planes",
-        )  # fmt: skip
+        fd, fn, filled, culled = d, n, 0, 0
+        for k in range(cfg.passes):  # a later pass counts the fill as measured: it spreads
+            fd, fn, more, cut = fill_view(
+                fd, fn, K, R, t, planes, rng_d,
+                distance_m=cfg.label_distance_m, rel_distance=cfg.label_rel_distance,
+                cell_px=cfg.cell_px, max_gap_frac=cfg.max_gap_frac, min_votes=cfg.min_votes,
+                min_agreement=cfg.min_agreement, extent_margin_m=cfg.extent_margin_m,
+                cull_behind=cfg.cull_behind and k == 0,
+                bounding_planes=cfg.fill_rule == "bounding_planes",
+                max_seen_through=cfg.max_seen_through if cfg.drop_phantoms else None,
+                any_boundary=cfg.fill_planes == "any_boundary",
+            )  # fmt: skip
+            filled, culled = filled + more, culled + cut
+            if not more:
+                break
+        if cfg.occlusion_min_points and filled:
+            bad = occluded_fill(fd, (fd > 0) & ~(d > 0), K, R, t, cloud, cfg.cell_px,
+                                min_points=cfg.occlusion_min_points)  # fmt: skip
+            fd[bad], fn[bad] = 0, 0
+            filled -= int(bad.sum())
         write_array(ws.map_path(dense_dir, "depth", name, "geometric"), fd)
         write_array(ws.map_path(dense_dir, "normal", name, "geometric"), fn)
         n_meas = int((d > 0).sum())
