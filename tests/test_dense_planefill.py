@@ -397,6 +397,13 @@ def test_a_second_pass_spreads_a_wall_fill_its_first_pass_could_not_reach():
     assert f1 > 0 and f2 > 0
     assert (two > 0).sum() == (d > 0).sum() + f1 + f2
     assert np.allclose(two[two > 0], 3.0, atol=1e-3)
+    cache: dict = {}  # the passes reuse the rays and plane hits: same result
+    one_c, n1_c, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), bounding_planes=True,
+                                  cache=cache)  # fmt: skip
+    assert "hits" in cache
+    two_c, _, _, _ = fill_view(one_c, n1_c, K, R, T, planes, (0.5, 10.0), bounding_planes=True,
+                               cache=cache)  # fmt: skip
+    assert np.array_equal(one_c, one) and np.array_equal(two_c, two)
 
 
 def test_fill_behind_a_surface_other_views_measured_is_emptied():

@@ -647,6 +647,44 @@ def validate_planes(
     return [j for j in kept if j not in why], why
 
 
+def _plane_hits(
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    planes: list[Plane],
+    shape: tuple[int, int],
+    bounding_planes: bool,
+    extent_margin_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Every pixel's ray (world direction with unit camera z), the camera centre, and the
+    z-depth where each ray meets each plane's extent (P, H*W; inf: it misses it); with
+    ``bounding_planes`` also where a fill may put each plane (a boundary's extent grown by
+    ``extent_margin_m``, an object's face only on its own cells, not at grazing angles)."""
+    h, w = shape
+    vv, uu = np.mgrid[0:h, 0:w]
+    ray_cam = np.stack([(uu + 0.5 - K[0, 2]) / K[0, 0], (vv + 0.5 - K[1, 2]) / K[1, 1],
+                        np.ones((h, w))], -1).reshape(-1, 3)  # fmt: skip
+    centre = -R.T @ t
+    ray = ray_cam @ R  # world directions with unit z in the camera
+    hits = np.full((len(planes), h * w), np.inf)
+    hits_fill = np.full((len(planes), h * w), np.inf) if bounding_planes else None
+    for j, pl in enumerate(planes):
+        denom = ray @ pl.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = -(centre @ pl.normal + pl.offset) / denom  # z-depth (ray has unit camera z)
+        ok = np.isfinite(z) & (z > 0)
+        if hits_fill is not None:  # where a fill may put this plane: a boundary's extent
+            # grown by the margin; an object's face only on its own cells (its edge is the
+            # object's)
+            okf = ok & (np.abs(denom) > 0.1 * np.linalg.norm(ray, axis=1))
+            margin = extent_margin_m if pl.boundary else 0.0
+            okf[okf] = pl.inside(centre + z[okf, None] * ray[okf], margin)
+            hits_fill[j, okf] = z[okf]
+        ok[ok] = pl.inside(centre + z[ok, None] * ray[ok])
+        hits[j, ok] = z[ok]
+    return ray, centre, hits, hits_fill
+
+
 def fill_view(
     depth: np.ndarray,
     normal: np.ndarray,
@@ -667,6 +705,7 @@ def fill_view(
     bounding_planes: bool = False,
     max_seen_through: float | None = 1.0,
     any_boundary: bool = False,
+    cache: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Fill one view's holes from the planes (see the module docstring).
 
@@ -681,6 +720,9 @@ def fill_view(
     culls nor fills this view. The room's boundaries (walls, floor) are not checked:
     nothing is measured past them, and depth behind them is an outlier. None: no check.
 
+    ``cache``: a dict kept across the passes over one view; the rays and plane hits are
+    computed in the first and reused.
+
     Returns:
         The depth and normal maps with the filled pixels, the number filled and the number
         of measured pixels culled.
@@ -689,27 +731,16 @@ def fill_view(
     measured = depth > 0
     if not planes or not measured.any():
         return depth, normal, 0, 0
-    # every pixel's ray, and where it meets each plane's extent (inf: it misses it)
-    vv, uu = np.mgrid[0:h, 0:w]
-    ray_cam = np.stack([(uu + 0.5 - K[0, 2]) / K[0, 0], (vv + 0.5 - K[1, 2]) / K[1, 1],
-                        np.ones((h, w))], -1).reshape(-1, 3)  # fmt: skip
-    centre = -R.T @ t
-    ray = ray_cam @ R  # world directions with unit z in the camera
-    hits = np.full((len(planes), h * w), np.inf)
-    hits_fill = np.full((len(planes), h * w), np.inf) if bounding_planes else None
-    for j, pl in enumerate(planes):
-        denom = ray @ pl.normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = -(centre @ pl.normal + pl.offset) / denom  # z-depth (ray has unit camera z)
-        ok = np.isfinite(z) & (z > 0)
-        if bounding_planes:  # where a fill may put this plane: a boundary's extent grown by
-            # the margin; an object's face only on its own cells (its edge is the object's)
-            okf = ok & (np.abs(denom) > 0.1 * np.linalg.norm(ray, axis=1))
-            margin = extent_margin_m if pl.boundary else 0.0
-            okf[okf] = pl.inside(centre + z[okf, None] * ray[okf], margin)
-            hits_fill[j, okf] = z[okf]
-        ok[ok] = pl.inside(centre + z[ok, None] * ray[ok])
-        hits[j, ok] = z[ok]
+    if cache is not None and "ray" in cache:  # an earlier pass over the same view
+        ray, centre = cache["ray"], cache["centre"]
+        hits = cache["hits"].copy()
+        hits_fill = None if cache["hits_fill"] is None else cache["hits_fill"].copy()
+    else:
+        ray, centre, hits, hits_fill = _plane_hits(K, R, t, planes, (h, w), bounding_planes,
+                                                   extent_margin_m)  # fmt: skip
+        if cache is not None:
+            cache.update(ray=ray, centre=centre, hits=hits.copy(),
+                         hits_fill=None if hits_fill is None else hits_fill.copy())  # fmt: skip
     flat_d = depth.reshape(-1)
     flat_m = measured.reshape(-1)
     seen_through: set[int] = set()
@@ -1073,6 +1104,7 @@ def plane_fill(
     for name, K, R, t, rng_d in tqdm(views, desc="plane fill", unit="view", disable=not progress):
         d, n = measured(name)
         fd, fn, filled, culled = d, n, 0, 0
+        cache: dict = {}
         for k in range(cfg.passes):  # a later pass counts the fill as measured: it spreads
             fd, fn, more, cut = fill_view(
                 fd, fn, K, R, t, planes, rng_d,
@@ -1082,7 +1114,7 @@ def plane_fill(
                 cull_behind=cfg.cull_behind and k == 0,
                 bounding_planes=cfg.fill_rule == "bounding_planes",
                 max_seen_through=cfg.max_seen_through if cfg.drop_phantoms else None,
-                any_boundary=cfg.fill_planes == "any_boundary",
+                any_boundary=cfg.fill_planes == "any_boundary", cache=cache,
             )  # fmt: skip
             filled, culled = filled + more, culled + cut
             if not more:
