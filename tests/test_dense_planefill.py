@@ -424,3 +424,21 @@ def test_fill_behind_a_surface_other_views_measured_is_emptied():
     stray = np.array([[0.0, 0.0, 2.0]])
     assert not occluded_fill(d, filled, K, R, T, stray).any()
     assert not occluded_fill(d, ~filled, K, R, T, box).any()  # measured pixels stay
+
+
+def test_the_floor_before_the_camera_is_filled_nearer_than_the_views_depth_range():
+    """The view's depth range comes from its sparse points (the stereo's sampling range);
+    the plain floor just before the camera lies nearer than any of them and is filled."""
+    from scenebot.dense.planefill import carved_hulls
+
+    truth = _room_view()
+    d = np.zeros_like(truth)
+    d[:8], d[-8:], d[:, :8], d[:, -8:] = truth[:8], truth[-8:], truth[:, :8], truth[:, -8:]
+    planes = planes_of(d)
+    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)]), strict=True):
+        pl.occupied = ext
+    near = (d == 0) & (truth < 1.5)
+    assert near.sum() > 500
+    fd, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (1.5, 10.0), bounding_planes=True)
+    assert (fd[near] > 0).mean() > 0.8
+    assert np.allclose(fd[near][fd[near] > 0], truth[near][fd[near] > 0], rtol=1e-3)

@@ -793,7 +793,7 @@ def fill_view(
     if bounding_planes:
         filled = _fill_front(out_d, out_n, measured, cell_label, cell_measured, votes, found,
                              ray, hits_fill, centre, R, planes, cell_px, min_votes,
-                             min_agreement, (lo, hi), any_boundary=any_boundary)  # fmt: skip
+                             min_agreement, any_boundary=any_boundary)  # fmt: skip
         return out_d, out_n, filled, culled
     winner = votes.argmax(0)
     top = votes.max(0)
@@ -849,7 +849,6 @@ def _fill_front(
     cell_px: int,
     min_votes: int,
     min_agreement: float,
-    depth_range: tuple[float, float],
     edge_px: int = 3,
     edge_rel: float = 0.05,
     any_boundary: bool = False,
@@ -903,7 +902,9 @@ def _fill_front(
     z = np.where(cand_px, hits[:, flat], np.inf)
     best = z.argmin(0)
     zb = z[best, np.arange(len(flat))]
-    ok = np.isfinite(zb) & (zb > depth_range[0]) & (zb < depth_range[1])
+    # not clipped to the view's depth range: that is the sparse points' (the stereo's
+    # sampling range), and the floor just before the camera lies nearer than any of them
+    ok = np.isfinite(zb)
     if edge_px > 0:  # not beside measured depth off by more than edge_rel: an object's edge
         import cv2
 
