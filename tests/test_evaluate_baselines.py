@@ -51,3 +51,34 @@ def test_shared_prefix_is_where_all_curves_agree():
     c = dict(b, seen_2=[0.05, 0.1, 0.2])
     assert _shared_prefix([a, c]) == 0
     assert _shared_prefix([{"photos": []}, {"photos": []}]) == 0
+
+
+def test_a_nested_baseline_imports_the_package_beside_its_snakefile(tmp_path, monkeypatch):
+    """The baseline's `python -m scenebot` runs in its own folder; the workflow's folder
+    goes first on PYTHONPATH so it runs the same code as the adaptive campaign, not an
+    installed copy from another checkout."""
+    import subprocess
+
+    import pytest
+
+    from scenebot.evaluate import baselines
+    from scenebot.evaluate.metrics import EvaluationError
+
+    scene_dir = tmp_path / "results" / "office"
+    write_campaign(scene_dir, [10, 5], [0.2, 0.4, 0.7], 0.5)
+    workflow = tmp_path / "checkout"
+    workflow.mkdir()
+    seen = {}
+
+    def fake_run(cmd, **kw):
+        seen.update(kw)
+        return subprocess.CompletedProcess(cmd, 1)
+
+    monkeypatch.setattr(baselines.subprocess, "run", fake_run)
+    monkeypatch.setenv("PYTHONPATH", "/elsewhere")
+    with pytest.raises(EvaluationError, match="baseline random failed"):
+        baselines.run_baselines({"scene": "office"}, scene_dir, scene_dir / "b.json",
+                                methods=("random",), snakefile=workflow / "Snakefile")  # fmt: skip
+    paths = seen["env"]["PYTHONPATH"].split(":")
+    assert paths == [str(workflow.resolve()), "/elsewhere"]
+    assert seen["cwd"] == (scene_dir / "baselines" / "random").resolve()

@@ -72,6 +72,19 @@ def baseline_config(
     return cfg
 
 
+def _nested_env(snakefile: Path) -> dict[str, str]:
+    """The environment of a nested baseline run: ``python -m scenebot`` runs in the
+    baseline's own folder, so without the workflow's folder first on ``PYTHONPATH`` it would
+    import whichever ``scenebot`` is installed (an editable install of another checkout),
+    not the package beside the Snakefile the adaptive campaign ran."""
+    import os
+
+    env = dict(os.environ)
+    root = str(Path(snakefile).resolve().parent)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
+    return env
+
+
 def _summary(scene_dir: Path) -> dict:
     ev_path = scene_dir / "final" / "evaluation.json"
     camp_path = scene_dir / "campaign.json"
@@ -190,7 +203,8 @@ def run_baselines(
                "--configfile", str(work / "config.yaml"), "--cores", str(cores)]  # fmt: skip
         LOG.info("baseline %s: %s (log %s)", method, " ".join(cmd), log)
         with open(log, "w") as fh:
-            res = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=work)
+            res = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=work,
+                                 env=_nested_env(snakefile))  # fmt: skip
         if res.returncode != 0:
             raise EvaluationError(f"baseline {method} failed (exit {res.returncode}); see {log}")
         scene = cfg.get("scene", "office")
