@@ -38,8 +38,10 @@ carpet). This step, between depth estimation and fusion:
    bounded by something nearer (a plain cabinet face before a wall) is not filled, because
    its nearest measured neighbours are the cabinet's edges, off every plane.
 5. **Fill**: each hole pixel of a filled cell gets the depth where its ray meets the plane
-   (in front of the camera, inside the plane's extent grown by ``extent_margin_m``, within the
-   view's depth range) and the plane's normal, turned towards the camera. ``passes`` repeat
+   (in front of the camera, inside the plane's extent grown by ``extent_margin_m``; with
+   ``same_plane`` also within the view's depth range, the sparse points' range, which the
+   floor just before the camera lies nearer than) and the plane's normal, turned towards
+   the camera. ``passes`` repeat
    the votes and fill with the fill counted as measured: a plain wall's fill spreads to the
    cells whose neighbours the first pass lacked.
 6. **Occlusion**: a filled pixel behind the depth that all views measured, projected into
