@@ -6,7 +6,15 @@ Compares, on the same reference view and sources (true cameras, known depth):
   top-k source aggregation (the kind of prototype the issue measured), the same-run reference;
 * ``taichi photometric``: the PatchMatch photometric pass (coarse-to-fine);
 * ``taichi full``: photometric + geometric pass + filter (what the stage runs per view);
-* ``colmap cuda``: pycolmap.patch_match_stereo on the same views, only where pycolmap has CUDA.
+* ``taichi all views``: the stage's three passes over every view of the set (each view with all
+  the others as sources), per view;
+* ``colmap cuda``: pycolmap.patch_match_stereo on the same views and sources, per view, only
+  where pycolmap has CUDA (``--colmap``).
+
+``--export DIR`` writes the views as a COLMAP dense workspace (``DIR/dense``) and as
+``DIR/views.npz``; ``--views DIR/views.npz`` runs the taichi rows on those views without
+rendering (numpy, OpenCV, taichi and pydantic only: no open3d), and ``--colmap DIR`` runs COLMAP
+on the workspace, so a GPU machine compares both on the same pixels.
 
 Each row: median wall time over repeats (after one warm-up that compiles the kernels), median
 process CPU time, the ratio to the reference, and quality: coverage (fraction of pixels with a
@@ -17,19 +25,23 @@ the true depth). Run ``python benchmarks/bench_dense.py --help``.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
 import cv2
 import numpy as np
 
-from scenebot.dense.config import PatchMatchConfig
+from scenebot.dense.config import DenseConfig, PatchMatchConfig
 from scenebot.dense.evaluate import depth_map_metrics
-from scenebot.dense.patchmatch import PatchMatchSolver, StereoView, init_taichi
-from scenebot.dense.synthetic import box_room_scene, intrinsics, look_at_pose, render_view
+
+if TYPE_CHECKING:  # imported where used: --views runs without open3d and pycolmap
+    from scenebot.dense.patchmatch import StereoView
 
 
 def plane_sweep(
@@ -82,7 +94,11 @@ def plane_sweep(
     return np.where(best < max_cost, best_d, 0.0).astype(np.float32)
 
 
-def make_views(width: int, height: int, num: int) -> tuple[list[StereoView], list[np.ndarray]]:
+def make_views(width: int, height: int, num: int) -> tuple[list, list[np.ndarray]]:
+    """``num`` views of the box room across y (true cameras), grey from a JPEG (quality 95)."""
+    from scenebot.dense.patchmatch import StereoView
+    from scenebot.dense.synthetic import box_room_scene, intrinsics, look_at_pose, render_view
+
     sc = box_room_scene()
     K = intrinsics(width, height)
     views, truth = [], []
@@ -98,6 +114,98 @@ def make_views(width: int, height: int, num: int) -> tuple[list[StereoView], lis
     return views, truth
 
 
+def export_views(folder: Path, width: int, height: int, num: int) -> tuple[list, list]:
+    """The :func:`make_views` cameras as a COLMAP dense workspace and an ``.npz``.
+
+    Writes ``folder/capture`` (photos, sparse model), ``folder/dense`` (pycolmap's undistorted
+    workspace, every view with all the others as sources) and ``folder/views.npz`` (the grey
+    views the taichi rows read, loaded from the workspace as the stage loads them, and their
+    true depth). Returns the views and true depths.
+    """
+    import shutil
+
+    from scenebot.dense import workspace as ws
+    from scenebot.dense.synthetic import box_room_scene, make_dataset
+
+    shutil.rmtree(folder, ignore_errors=True)
+    centers = np.stack([np.zeros(num), np.linspace(-0.3, 0.3, num), np.zeros(num)], axis=1)
+    rec, synth = make_dataset(folder / "capture", box_room_scene(), centers, np.zeros(num),
+                              width, height)  # fmt: skip
+    dense = folder / "dense"
+    rec = ws.undistort(folder / "capture" / "sparse", folder / "capture" / "images", dense,
+                       max(width, height))  # fmt: skip
+    ids = sorted(rec.images)
+    names = [rec.image(i).name for i in ids]
+    ws.write_configs(dense, {n: [m for m in names if m != n] for n in names})
+    views = [ws.load_view(rec, i, dense) for i in ids]
+    truth = [next(v.depth for v in synth if v.name == n) for n in names]
+    np.savez_compressed(
+        folder / "views.npz",
+        names=np.array(names),
+        gray=np.stack([np.round(v.gray * 255).astype(np.uint8) for v in views]),
+        K=np.stack([v.K for v in views]),
+        R=np.stack([v.R for v in views]),
+        t=np.stack([v.t for v in views]),
+        depth=np.stack(truth).astype(np.float32),
+    )
+    return views, truth
+
+
+def load_views(path: Path) -> tuple[list, list[np.ndarray]]:
+    """Views and true depths written by :func:`export_views`."""
+    from scenebot.dense.patchmatch import StereoView
+
+    z = np.load(path)
+    views = [
+        StereoView(str(n), g.astype(np.float32) / 255.0, K, R, t)
+        for n, g, K, R, t in zip(z["names"], z["gray"], z["K"], z["R"], z["t"], strict=True)
+    ]
+    return views, list(z["depth"])
+
+
+def print_per_view(label: str, names: list[str], metrics: list[dict]) -> None:
+    """One line: each view's coverage / fraction within 2 %."""
+    cells = [
+        f"{n} {m['coverage']:.3f}/{m['accuracy']:.3f}" for n, m in zip(names, metrics, strict=True)
+    ]
+    print(f"# {label}, coverage/within 2% per view: " + ", ".join(cells))
+
+
+def colmap_rows(folder: Path, truth: list[np.ndarray], mid: int, rng, repeats: int) -> list:
+    """pycolmap.patch_match_stereo over ``folder/dense`` (every view), per-view wall time.
+
+    Returns (name, wall s per view, cpu s per view, metrics of the middle view) rows; none
+    where pycolmap has no CUDA.
+    """
+    import shutil
+
+    import pycolmap
+
+    from scenebot.dense.colmap_cuda import run_patch_match
+    from scenebot.dense.colmap_io import read_array
+
+    if not pycolmap.has_cuda:
+        print("# --colmap: this pycolmap has no CUDA, no COLMAP row")
+        return []
+    dense = folder / "dense"
+    names = sorted(p.name for p in (dense / "images").iterdir())
+    cfg = DenseConfig(max_image_size=max(truth[0].shape), num_threads=-1)
+    walls, cpus = [], []
+    for _ in range(repeats + 1):  # the first run warms up CUDA
+        for kind in ("depth_maps", "normal_maps", "consistency_graphs"):
+            shutil.rmtree(dense / "stereo" / kind, ignore_errors=True)
+            (dense / "stereo" / kind).mkdir(parents=True)
+        c0 = time.process_time()
+        walls.append(run_patch_match(cfg, dense, rng) / len(names))
+        cpus.append((time.process_time() - c0) / len(names))
+    depth = [read_array(dense / "stereo" / "depth_maps" / f"{n}.geometric.bin") for n in names]
+    d = depth[mid]
+    ms = [depth_map_metrics(x, g) for x, g in zip(depth, truth, strict=True)]
+    print_per_view("colmap cuda", names, ms)
+    return [(f"colmap cuda, {len(names)} views, per view", statistics.median(walls[1:]),
+             statistics.median(cpus[1:]), depth_map_metrics(d, truth[mid]))]  # fmt: skip
+
+
 def timed(fn, repeats: int):
     fn()  # warm-up (kernel compilation, caches)
     walls, cpus, out = [], [], None
@@ -111,16 +219,14 @@ def timed(fn, repeats: int):
 
 def stage_quality(width: int, height: int, out: str, backend: str, per_row: int) -> None:
     """Run the whole dense stage on a synthetic capture and print depth and cloud quality."""
-    import json
     import shutil
-    from pathlib import Path
 
     import open3d as o3d
 
     from scenebot.dense import evaluate, stage
     from scenebot.dense import workspace as ws
     from scenebot.dense.config import DenseConfig
-    from scenebot.dense.synthetic import make_dataset, stereo_rig
+    from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
 
     root = Path(out)
     shutil.rmtree(root, ignore_errors=True)
@@ -167,59 +273,71 @@ def main() -> None:
     ap.add_argument("--sources", type=int, default=4, help="source views per reference")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "auto"])
-    ap.add_argument("--threads", type=int, default=2, help="taichi CPU threads")
+    ap.add_argument("--threads", type=int, default=2,
+                    help="CPU threads of taichi and OpenCV (the plane sweep)")  # fmt: skip
     ap.add_argument("--skip-reference", action="store_true")
+    ap.add_argument("--all-views", action="store_true",
+                    help="also time the stage's passes over every view, per view")  # fmt: skip
+    ap.add_argument("--export", type=Path, help="write the views as a COLMAP workspace + npz")
+    ap.add_argument("--views", type=Path, help="read the views from an --export npz")
+    ap.add_argument("--colmap", type=Path,
+                    help="an --export folder: also run pycolmap's CUDA PatchMatch")  # fmt: skip
+    ap.add_argument("--no-taichi", action="store_true",
+                    help="with --colmap: the COLMAP row alone, no taichi import")  # fmt: skip
+    ap.add_argument("--json", type=Path, help="write the rows and settings here")
     ap.add_argument("--stage", action="store_true", help="run the whole stage, print quality")
     ap.add_argument("--backend", default="auto", choices=["auto", "taichi", "colmap_cuda"])
     ap.add_argument("--per-row", type=int, default=7, help="--stage: cameras per row (2 rows)")
     ap.add_argument("--out", default="benchmarks/out/dense_stage", help="--stage: output folder")
     args = ap.parse_args()
+    if args.no_taichi:  # COLMAP alone: no taichi needed (a machine with the CUDA pycolmap)
+        if not args.colmap:
+            ap.error("--no-taichi needs --colmap")
+        truth = list(np.load(args.colmap / "views.npz")["depth"])
+        for name, wall, cpu, m in colmap_rows(args.colmap, truth, (len(truth) - 1) // 2,
+                                              (0.5, 4.5), args.repeats):  # fmt: skip
+            print(f"{name}: {wall:.3f} s wall, {cpu:.3f} s cpu per view; middle view "
+                  f"coverage {m['coverage']:.3f}, within 2% {m['accuracy']:.3f}")  # fmt: skip
+            if args.json:
+                args.json.write_text(json.dumps({"name": name, "wall_s": wall, "cpu_s": cpu, **m}))
+        return
+    from scenebot.dense.patchmatch import PatchMatchSolver, init_taichi
+
     if args.stage:
         init_taichi(args.arch, args.threads)
         stage_quality(args.width, args.height, args.out, args.backend, args.per_row)
         return
 
-    arch = init_taichi(args.arch, args.threads)
-    views, truth = make_views(args.width, args.height, args.sources + 1)
-    mid = args.sources // 2
+    if args.arch == "cpu":
+        cv2.setNumThreads(args.threads)
+    n = args.sources + 1
+    if args.views:
+        views, truth = load_views(args.views)
+    elif args.export:
+        views, truth = export_views(args.export, args.width, args.height, n)
+    else:
+        views, truth = make_views(args.width, args.height, n)
+    h, w = views[0].gray.shape
+    mid = (len(views) - 1) // 2
     ref, gt = views[mid], truth[mid]
     srcs = [v for i, v in enumerate(views) if i != mid]
-    src_gt = [d for i, d in enumerate(truth) if i != mid]
     cfg = PatchMatchConfig()
-    solver = PatchMatchSolver(cfg)
     rng = (0.5, 4.5)
-
-    def photometric():
-        return solver.estimate(ref, srcs, rng)
-
-    photometric()
-    # the geometric pass reads the sources' own photometric depth maps, as in the stage
-    src_photo = [solver.estimate(v, [w for w in views if w is not v], rng).depth for v in srcs]
-
-    def full():
-        p = solver.estimate(ref, srcs, rng)
-        g = solver.estimate(ref, srcs, rng, src_depths=src_photo, init=(p.depth, p.normal))
-        return solver.filter(ref, srcs, g, src_photo)
-
     rows = []
     ref_wall = None
     if not args.skip_reference:
         wall, cpu, d = timed(lambda: plane_sweep(ref, srcs, rng), args.repeats)
         ref_wall = wall
         rows.append(("plane-sweep (ref), 96 planes", wall, cpu, depth_map_metrics(d, gt)))
-    wall, cpu, r = timed(photometric, args.repeats)
-    rows.append((f"taichi photometric [{arch}]", wall, cpu, depth_map_metrics(r.depth, gt)))
-    wall, cpu, r = timed(full, args.repeats)
-    rows.append((f"taichi photo+geom+filter [{arch}]", wall, cpu, depth_map_metrics(r.depth, gt)))
+    arch = init_taichi(args.arch, args.threads)
+    rows += taichi_rows(PatchMatchSolver(cfg), views, truth, mid, rng, args.repeats, arch,
+                        args.all_views)  # fmt: skip
+    if args.colmap:
+        rows += colmap_rows(args.colmap, truth, mid, rng, args.repeats)
 
-    import pycolmap
-
-    if pycolmap.has_cuda:
-        print("# pycolmap has CUDA: compare with `--stage --backend colmap_cuda`")
-    _ = src_gt
     iters = "/".join(str(i) for i in cfg.iterations)
     print(
-        f"# {args.width}x{args.height}, {len(srcs)} source views, top_k={cfg.top_k}, "
+        f"# {w}x{h}, {len(srcs)} source views, top_k={cfg.top_k}, "
         f"iterations per level (full res first) {iters}, neighbours {cfg.neighbors}, "
         f"geom iterations {cfg.geom_iterations}, window {2 * cfg.window_radius + 1}px step "
         f"{cfg.window_step}, taichi arch {arch}, threads {args.threads}, "
@@ -231,6 +349,55 @@ def main() -> None:
         ratio = ref_wall / wall if ref_wall else float("nan")
         print(f"{name:44s} {wall:8.3f} {cpu:8.3f} {ratio:9.2f} {m['coverage']:9.3f} "
               f"{m['accuracy']:9.3f}")  # fmt: skip
+    if args.json:
+        args.json.write_text(json.dumps({
+            "size": [w, h], "sources": len(srcs), "arch": arch, "threads": args.threads,
+            "repeats": args.repeats, "iterations": list(cfg.iterations),
+            "geom_iterations": cfg.geom_iterations,
+            "rows": [{"name": r[0], "wall_s": r[1], "cpu_s": r[2], **r[3]} for r in rows],
+        }, indent=1))  # fmt: skip
+
+
+def taichi_rows(solver, views, truth, mid, rng, repeats, arch, all_views) -> list:
+    """Photometric, full (photometric + geometric + filter) for the middle view and, with
+    ``all_views``, the stage's three passes over every view (per view)."""
+    ref, gt = views[mid], truth[mid]
+    srcs = [v for i, v in enumerate(views) if i != mid]
+    rows = []
+
+    def photometric():
+        return solver.estimate(ref, srcs, rng)
+
+    photometric()
+    # the geometric pass reads the sources' own photometric depth maps, as in the stage
+    src_photo = [solver.estimate(v, [x for x in views if x is not v], rng).depth for v in srcs]
+
+    def full():
+        p = solver.estimate(ref, srcs, rng)
+        g = solver.estimate(ref, srcs, rng, src_depths=src_photo, init=(p.depth, p.normal))
+        return solver.filter(ref, srcs, g, src_photo)
+
+    wall, cpu, r = timed(photometric, repeats)
+    rows.append((f"taichi photometric [{arch}]", wall, cpu, depth_map_metrics(r.depth, gt)))
+    wall, cpu, r = timed(full, repeats)
+    rows.append((f"taichi photo+geom+filter [{arch}]", wall, cpu, depth_map_metrics(r.depth, gt)))
+    if all_views:
+
+        def stage_passes():
+            others = [[x for x in views if x is not v] for v in views]
+            ph = [solver.estimate(v, o, rng) for v, o in zip(views, others, strict=True)]
+            ge = [solver.estimate(v, o, rng, init=(p.depth, p.normal),
+                                  src_depths=[q.depth for q in ph if q is not p])
+                  for v, o, p in zip(views, others, ph, strict=True)]  # fmt: skip
+            return [solver.filter(v, o, g, [q.depth for q in ge if q is not g])
+                    for v, o, g in zip(views, others, ge, strict=True)]  # fmt: skip
+
+        wall, cpu, out = timed(stage_passes, repeats)
+        ms = [depth_map_metrics(o.depth, g) for o, g in zip(out, truth, strict=True)]
+        print_per_view("taichi all views", [v.name for v in views], ms)
+        rows.append((f"taichi all {len(views)} views, per view [{arch}]", wall / len(views),
+                     cpu / len(views), ms[mid]))  # fmt: skip
+    return rows
 
 
 if __name__ == "__main__":

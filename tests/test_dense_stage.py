@@ -8,7 +8,7 @@ import open3d as o3d
 import pycolmap
 import pytest
 
-from scenebot.dense import stage
+from scenebot.dense import colmap_cuda, stage
 from scenebot.dense import workspace as ws
 from scenebot.dense.colmap_io import read_array, write_array
 from scenebot.dense.config import DenseConfig
@@ -127,6 +127,26 @@ def test_colmap_cuda_backend_requires_cuda():
     with pytest.raises(RuntimeError, match="has no CUDA"):
         stage.choose_backend(DenseConfig(backend="colmap_cuda"))
     assert stage.choose_backend(DenseConfig()) == "taichi"
+
+
+def test_colmap_patch_match_options_follow_the_dense_config():
+    cfg = DenseConfig(max_image_size=480, num_threads=2,
+                      patchmatch={"window_radius": 5, "geom_iterations": 1,
+                                  "filter_min_consistent": 3})  # fmt: skip
+    opts = colmap_cuda.patch_match_options(cfg, (0.4, 6.0))
+    assert (opts.max_image_size, opts.window_radius, opts.num_threads) == (480, 5, 2)
+    assert opts.geom_consistency and opts.filter and opts.filter_min_num_consistent == 3
+    assert (opts.depth_min, opts.depth_max) == pytest.approx((0.4, 6.0))
+    # without a range COLMAP takes each view's from the sparse points; no geometric pass
+    opts = colmap_cuda.patch_match_options(DenseConfig(patchmatch={"geom_iterations": 0}))
+    assert opts.depth_min < 0 and opts.depth_max < 0 and not opts.geom_consistency
+
+
+def test_colmap_patch_match_without_cuda_names_the_wheel(tmp_path):
+    if pycolmap.has_cuda:
+        pytest.skip("this pycolmap has CUDA")
+    with pytest.raises(RuntimeError, match="pycolmap-cuda12"):
+        colmap_cuda.run_patch_match(DenseConfig(), tmp_path)
 
 
 def test_without_geometric_pass(capture, tmp_path):

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -78,3 +79,28 @@ def test_a_failing_benchmark_is_reported_and_the_rest_still_runs(tmp_path, runne
     data = json.loads(out.with_suffix(".json").read_text())
     assert "broken" in data["failures"] and any(r["group"] == "machine" for r in data["rows"])
     assert "FAILED" in out.read_text()
+
+
+def test_exported_dense_views_read_back_as_the_same_pixels_and_workspace(tmp_path):
+    """`bench_dense.py --export` writes what `--views` and `--colmap` read on a GPU machine."""
+    spec = importlib.util.spec_from_file_location(
+        "bench_dense", ROOT / "benchmarks" / "bench_dense.py"
+    )
+    bd = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bd)
+    views, truth = bd.export_views(tmp_path / "x", 96, 72, 3)
+    back, back_truth = bd.load_views(tmp_path / "x" / "views.npz")
+    assert (
+        [v.name for v in back]
+        == [v.name for v in views]
+        == ["view_000.jpg", "view_001.jpg", "view_002.jpg"]
+    )
+    for a, b, da, db in zip(views, back, truth, back_truth, strict=True):
+        assert np.abs(a.gray - b.gray).max() <= 0.5 / 255 + 1e-6
+        assert np.allclose(a.K, b.K) and np.allclose(a.R, b.R) and np.allclose(a.t, b.t)
+        assert np.array_equal(da, db) and (db > 0).mean() > 0.9
+    # the middle camera sits between the others; every view has the other two as sources
+    assert np.linalg.norm(back[0].t - back[2].t) > np.linalg.norm(back[0].t - back[1].t)
+    cfg = (tmp_path / "x" / "dense" / "stereo" / "patch-match.cfg").read_text().split("\n")
+    assert cfg[0] == "view_000.jpg" and cfg[1] == "view_001.jpg, view_002.jpg"
+    assert len(list((tmp_path / "x" / "dense" / "images").iterdir())) == 3

@@ -6,10 +6,13 @@ The simulator's true geometry is used here to *measure* the dense stage, never t
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-import open3d as o3d
 from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:  # open3d is imported where it is used: the depth-map metrics need numpy only
+    import open3d as o3d
 
 DEFAULT_THRESHOLDS_M = (0.01, 0.02, 0.05)
 
@@ -50,6 +53,8 @@ def normal_angle_deg(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
 
 def mesh_raycaster(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
     """Raycasting scene of a true mesh ((V, 3) metres, (T, 3) indices)."""
+    import open3d as o3d
+
     rc = o3d.t.geometry.RaycastingScene()
     rc.add_triangles(
         o3d.core.Tensor(np.asarray(vertices, np.float32)),
@@ -84,6 +89,8 @@ def visible_surface_samples(
     Returns:
         (M, 3) float64 visible surface points.
     """
+    import open3d as o3d
+
     from scenebot.dense.synthetic import sample_surface
 
     v = np.asarray(vertices, np.float64)
@@ -138,6 +145,8 @@ def cloud_metrics(
         ``{"1cm": {"accuracy": .., "completeness": .., "fscore": ..}, ...,
         "median_error_m": {"accuracy": .., "completeness": ..}}``.
     """
+    import open3d as o3d
+
     points = np.asarray(points, np.float64)
     if len(points) == 0:
         raise ValueError("cloud_metrics: the point cloud is empty")
@@ -178,6 +187,8 @@ def true_depth(
     Returns:
         (height, width) float32 z-depth in metres, 0 where no surface is hit.
     """
+    import open3d as o3d
+
     u, v = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
     d_cam = np.stack([u, v, np.ones_like(u)], -1).reshape(-1, 3) @ np.linalg.inv(K).T
     d_world = d_cam @ R  # R^T d, with z_cam = 1 so t_hit is the z-depth

@@ -24,6 +24,7 @@ import numpy as np
 import pycolmap
 
 from scenebot.dense import workspace as ws
+from scenebot.dense.colmap_cuda import run_patch_match
 from scenebot.dense.colmap_io import read_array, write_array
 from scenebot.dense.config import DenseConfig
 from scenebot.dense.patchmatch import DepthResult, PatchMatchSolver, StereoView, init_taichi
@@ -165,16 +166,7 @@ def _run_taichi(
 
 def _run_colmap_cuda(cfg: DenseConfig, plans: list[ViewPlan], dense_dir: Path) -> list[dict]:
     """pycolmap.patch_match_stereo (CUDA) with the same sources and depth ranges."""
-    opts = pycolmap.PatchMatchOptions()
-    opts.max_image_size = cfg.max_image_size
-    opts.window_radius = max(cfg.patchmatch.window_radius, 3)
-    opts.geom_consistency = cfg.patchmatch.geom_iterations > 0
-    opts.filter = True
-    opts.filter_min_num_consistent = max(cfg.patchmatch.filter_min_consistent, 1)
-    opts.num_threads = cfg.num_threads
-    t0 = time.perf_counter()
-    pycolmap.patch_match_stereo(str(dense_dir), options=opts)
-    per_view = (time.perf_counter() - t0) / max(len(plans), 1)
+    per_view = run_patch_match(cfg, dense_dir) / max(len(plans), 1)
     return [{"name": p.name, "colmap_cuda_s": per_view} for p in plans]
 
 
