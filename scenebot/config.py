@@ -204,6 +204,16 @@ class FollowConfig(_Model):
     contact_distance_m: float = Field(
         0.25, ge=0, description="Distance (m) ahead of the robot's axis where a bump is marked."
     )
+    retrace_clear_m: float = Field(
+        1.0,
+        ge=0,
+        description="After giving up on a goal, drive the motions that brought the robot "
+        "there backwards, latest first, until it stands this far (m, by odometry) from where "
+        "it gave up: it leaves by the way it came, through space it has driven. 0: off.",
+    )
+    retrace_max_m: float = Field(
+        3.0, ge=0, description="Drive at most this far (m) when retracing."
+    )
     max_localize_retries: int = Field(
         8,
         ge=0,

@@ -7,7 +7,9 @@ corrected by the compass after every motion (``compass_std_deg``); a photo is
 localized at every node, after every large turn (slip happens mostly on turns) and after every
 ``localize_every_m`` of driving. When a bumper or a stall stops the robot, it backs up, drives
 a short distance off the path, marks the obstacle on its planner and plans a new path; at the
-``max_obstacles``-th obstacle it gives up on the goal, logging why. A photo that does not
+``max_obstacles``-th obstacle it gives up on the goal, logging why, and retraces its own motions
+backwards until it stands ``retrace_clear_m`` from where it gave up: a robot wedged in a corner
+the map does not show leaves by the way it came in. A photo that does not
 localize (too few matches or inliers, or a pose that is not that of a level camera on the
 robot) leaves the odometry estimate in charge; the next motion is followed by another attempt,
 and at the goal the robot turns in place to look elsewhere before retrying. A fix that jumps
@@ -185,6 +187,8 @@ class PathFollower:
         self._fixes_here: list[Pose2D] = []  # fixes since the robot last drove
         self._goal_index = 0
         self._result: FollowResult | None = None
+        # the motions driven so far, as the encoders counted them, for retracing
+        self._trail: list[tuple[str, float]] = []
 
     # ------------------------------------------------------------------ state
     @property
@@ -356,6 +360,8 @@ class PathFollower:
                 raise _GiveUp(f"more than {self.cfg.max_motions} motion commands for this goal")
         r = self.robot.drive(amount) if kind == "drive" else self.robot.turn(amount)
         self._dead_reckon(r.angle_rad if kind == "turn" else 0.0)
+        self._trail.append((kind, r.distance_m if kind == "drive" else r.angle_rad))
+        del self._trail[: -self.TRAIL_LENGTH]
         if kind == "drive":
             self._since_fix_m += abs(r.distance_m)
             self._fixes_here.clear()
@@ -364,6 +370,55 @@ class PathFollower:
         return r
 
     # ------------------------------------------------------------------ obstacles
+    TRAIL_LENGTH = 400  # motions kept for retracing
+
+    def retrace(self) -> float:
+        """Drive the recorded motions backwards, latest first, until the robot stands
+        ``retrace_clear_m`` (odometry) from where it started retracing, or has driven
+        ``retrace_max_m``, or a bumper stops it; then localize.
+
+        The motions brought the robot here through space it could drive, so undoing them
+        leaves a corner the map does not show by the way it came in, whatever the map and
+        the pose estimate say. Undone motions leave the trail.
+
+        Returns:
+            The distance driven (m).
+        """
+        cfg = self.cfg
+        if cfg.retrace_clear_m <= 0 or not self._trail:
+            return 0.0
+        start = self.robot.sense().odometry
+        driven, motions, stop = 0.0, 0, "trail exhausted"
+        self._event("retrace_start", trail=len(self._trail))
+        while self._trail:
+            o = self.robot.sense().odometry
+            if math.hypot(o.x - start.x, o.y - start.y) >= cfg.retrace_clear_m:
+                stop = "clear"
+                break
+            kind, amount = self._trail[-1]
+            if kind == "drive" and driven + abs(amount) > cfg.retrace_max_m:
+                stop = f"retrace_max_m ({cfg.retrace_max_m} m)"
+                break
+            self._trail.pop()
+            if abs(amount) < 1e-6:
+                continue
+            r = self.robot.drive(-amount) if kind == "drive" else self.robot.turn(-amount)
+            self._dead_reckon(r.angle_rad if kind == "turn" else 0.0)
+            motions += 1
+            if kind == "drive":
+                driven += abs(r.distance_m)
+                self._since_fix_m += abs(r.distance_m)
+                self._fixes_here.clear()
+            if r.interrupted:
+                stop = f"{r.status} ({r.bumper or 'no'} bumper)"
+                break
+        o = self.robot.sense().odometry
+        self._event("retrace_end", motions=motions, driven_m=driven, stop=stop,
+                    moved_m=math.hypot(o.x - start.x, o.y - start.y))  # fmt: skip
+        if motions:
+            self.localize_now()
+        return driven
+
     def _handle_obstacle(self, r: MotionResult, goal_xy: np.ndarray) -> PlannedPath:
         res = self._result
         assert res is not None
@@ -485,6 +540,8 @@ class PathFollower:
         except _GiveUp as g:
             res.reached = False
             res.reason = g.reason
+            if res.obstacles > 0 and "link" not in g.reason:
+                self.retrace()
         p = self.pose
         res.pose = p
         res.goal_xy = (float(goal[0]), float(goal[1]))

@@ -444,3 +444,29 @@ def test_a_goal_is_reached_only_on_a_fix_a_second_view_confirms(tmp_path, confir
         assert res.confirmed_at_goal and true_off < 0.06
     else:
         assert true_off > 0.08  # the wrong fix ended it
+
+
+@pytest.mark.parametrize("clear_m", [0.0, 1.0])
+def test_after_giving_up_the_robot_leaves_a_blind_pocket_by_the_way_it_came(tmp_path, clear_m):
+    # a pocket open to the west the map does not know about; the goal lies beyond its end
+    # wall, and no photo localizes (a close wall): the robot bumps its way around inside
+    pocket = [(0.8, 0.45, 2.2, 0.55), (0.8, -0.55, 2.2, -0.45), (2.1, -0.55, 2.2, 0.55)]
+    robot = KinematicRobot((0.0, 0.0, 0.0), boxes=pocket, turn_slip=0.0)
+    loc = OracleLocalizer(robot, fail=lambda k: k > 0)  # the start is known, then nothing
+    with CaptureLog(tmp_path / "log.jsonl") as log:
+        f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid()),
+                         FollowConfig(camera_forward_m=CAM_FWD, max_obstacles=3,
+                                      retrace_clear_m=clear_m), tmp_path, log,
+                         truth=lambda: {"truth_xy": robot.true[:2].tolist()})  # fmt: skip
+        res = f.go_to(np.array([3.0, 0.0]))
+    assert not res.reached and res.obstacles == 3
+    events = list(read_log(tmp_path / "log.jsonl"))
+    gave_up = [e for e in events if e.get("event") == "obstacle"][-1]["truth"]["truth_xy"]
+    moved = math.hypot(robot.true[0] - gave_up[0], robot.true[1] - gave_up[1])
+    assert robot.min_clearance >= robot.radius - 1e-9  # never drove through a wall
+    if clear_m == 0:
+        assert moved < 0.5 and not any(e.get("event") == "retrace_end" for e in events)
+        return
+    end = [e for e in events if e.get("event") == "retrace_end"][-1]
+    assert end["stop"] == "clear" and end["moved_m"] >= 1.0
+    assert moved >= 0.95 and robot.true[0] < 0.8  # out of the pocket, on its open side

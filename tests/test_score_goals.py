@@ -216,3 +216,31 @@ def test_a_round_that_buys_too_little_completes_exploration(
         assert doc["score_gain"]["area_gain"] == pytest.approx(1 / previous_area - 1, abs=1e-3)
     assert ("diminishing returns" in doc.get("complete_because", "")) is complete
     assert doc["goals"]  # the goals are still listed, for information
+
+
+@pytest.mark.parametrize(("previous_images", "complete"), [(72, False), (60, True)])
+def test_a_round_that_added_no_photo_shows_no_diminishing_returns(
+    scored_room, tmp_path, previous_images, complete
+):
+    """A round whose goals were all missed added nothing to the map: its unchanged score is
+    no evidence that more photos would not help, so the campaign goes on."""
+    mean, area = scored_room["doc"]["mean_score_deg"], scored_room["doc"]["free_area_m2"]
+    prev = tmp_path / "round_000" / "goals.json"
+    prev.parent.mkdir()
+    prev.write_text(json.dumps({"mean_score_deg": 1.01 * mean, "free_area_m2": area,
+                                "map_images": previous_images}))  # fmt: skip
+    doc = run_goals(
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1),
+        GoalsInputs(
+            scored_room["so"].candidates_csv,
+            scored_room["mo"].freespace_npz,
+            scored_room["root"] / "sfm",
+            prev,
+        ),
+        GoalsOutputs(tmp_path / "round_001" / "goals.json"),
+    )
+    assert doc["map_images"] == 72  # 6 places x 12 headings
+    assert doc["complete"] is complete
+    assert ("not_applied" in doc["score_gain"]) is not complete
+    if not complete:
+        assert "added no photo" in doc["score_gain"]["not_applied"]

@@ -225,8 +225,9 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     )
     scored = any_valid & np.isfinite(cols["score_deg"])
     mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
+    map_images = _registered_images(inputs.sfm_dir)
     returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
-                                  cfg.min_score_gain, cfg.min_area_gain)  # fmt: skip
+                                  cfg.min_score_gain, cfg.min_area_gain, map_images)  # fmt: skip
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
@@ -244,6 +245,7 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
             "nms_angle_deg": cfg.nms_angle_deg,
             "mean_score_deg": None if mean_score is None else round(mean_score, 4),
             "free_area_m2": round(fs.area_m2, 4),
+            "map_images": map_images,
             "score_gain": returns,
         },
     )
@@ -275,6 +277,7 @@ def diminishing_returns(
     previous_goals_json: Path | None,
     min_gain: float,
     min_area_gain: float,
+    map_images: int | None = None,
 ) -> dict | None:
     """What the last round bought, and whether that is too little to go on.
 
@@ -286,6 +289,10 @@ def diminishing_returns(
     than ``min_gain`` (a fraction of the previous mean) either way *and* the free space grew
     by less than ``min_area_gain``. None for round 0 (no previous ``goals.json``) or when a
     measure is missing.
+
+    A round that added no photo to the map (``map_images``, the registered images, no more
+    than the previous round's: its goals were not reached) measured nothing, so it cannot
+    show diminishing returns: the test is not applied, and the next round tries again.
     """
     if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
         return None
@@ -301,6 +308,16 @@ def diminishing_returns(
            "area_gain": round(area_gain, 4), "min_area_gain": min_area_gain,
            "complete": bool(min_gain > 0 and abs(gain) < min_gain
                             and area_gain < min_area_gain)}  # fmt: skip
+    prev_images = prev_doc.get("map_images")
+    if map_images is not None and prev_images is not None:
+        out["map_images"], out["previous_map_images"] = map_images, prev_images
+        if map_images <= prev_images:
+            out["complete"] = False
+            out["not_applied"] = (
+                f"the last round added no photo to the map ({prev_images} -> {map_images} "
+                "registered images: its goals were not reached), so no change in the score "
+                "says nothing about what more photos would bring"
+            )
     if out["complete"]:
         out["reason"] = (
             f"diminishing returns: since the previous round the mean view score changed by "
@@ -310,6 +327,15 @@ def diminishing_returns(
             f"{100 * min_area_gain:.0f}%)"
         )
     return out
+
+
+def _registered_images(sfm_dir: Path | None) -> int | None:
+    """Registered images of the round's map, None without one."""
+    if sfm_dir is None or not (Path(sfm_dir) / "images.bin").is_file():
+        return None
+    import pycolmap
+
+    return int(pycolmap.Reconstruction(str(sfm_dir)).num_reg_images())
 
 
 def _best(score: np.ndarray) -> float | None:
