@@ -9,6 +9,11 @@ second (median of repeats, wall clock), measured in this run for both implementa
 evals per CPU-second, i.e. per core). Run:
 
     TI_SKIP_VERSION_CHECK=ON nice -n 10 .venv/bin/python benchmarks/bench_score.py [--quick]
+
+``--export FILE.npz`` saves the decimated mesh, the source poses and the candidates (and stops);
+``--scene
+FILE.npz --arch gpu --no-reference`` times the taichi kernel on them where open3d (mesh
+building, the numpy reference's ray casting) is not installed, e.g. on a GPU machine.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from scenebot.score import synthetic as syn
 from scenebot.score.candidates import sample_candidates
 from scenebot.score.config import MeshConfig, ScoreConfig
 from scenebot.score.freespace import compute_freespace
-from scenebot.score.geometry import read_sparse_map
+from scenebot.score.geometry import Intrinsics, read_sparse_map
 from scenebot.score.kernel import TaichiScorer, init_taichi, source_views_for_depth
 from scenebot.score.mesh import build_mesh, decimate
 from scenebot.score.reference import ReferenceScorer
@@ -87,33 +92,60 @@ def rate(fn, n: int, repeats: int) -> tuple[float, float]:
     return statistics.median(walls), statistics.median(cpus)
 
 
-def scorers(V, F, R, t, K, w, h, S, batch):
+def scorers(V, F, R, t, K, w, h, S, batch, backend="cpu", reference=True):
     sv, size = source_views_for_depth(R[:S], t[:S], [K] * S, ScoreConfig().source_depth_width)
     intr = K.scaled(w, h)
-    tk = TaichiScorer(V, F, sv, size, intr, batch_size=batch, backend="cpu")
-    ref = ReferenceScorer(V, F, sv, size, intr)
+    tk = TaichiScorer(V, F, sv, size, intr, batch_size=batch, backend=backend)
+    ref = ReferenceScorer(V, F, sv, size, intr) if reference else None
     return tk, ref
+
+
+def save_scene(path: Path, V, F, R, t, K: Intrinsics, cands: np.ndarray) -> None:
+    """The scoring inputs (decimated mesh, sources, candidates) for ``--scene``."""
+    k = [K.width, K.height, K.fx, K.fy, K.cx, K.cy]
+    np.savez_compressed(path, V=V, F=F, R=R, t=t, K=np.array(k, float), cands=cands)
+
+
+def load_scene(path: Path):
+    """(V, F, R, t, K, candidates) written by :func:`save_scene`."""
+    z = np.load(path)
+    w, h, fx, fy, cx, cy = z["K"]
+    K = Intrinsics(int(w), int(h), float(fx), float(fy), float(cx), float(cy))
+    return z["V"], z["F"], z["R"], z["t"], K, z["cands"]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer candidates and repeats")
+    ap.add_argument("--arch", default="cpu", choices=["cpu", "gpu"], help="taichi arch")
+    ap.add_argument("--export", type=Path, help="save the scoring inputs to this .npz")
+    ap.add_argument("--scene", type=Path, help="score the inputs of an --export .npz")
+    ap.add_argument("--no-reference", action="store_true", help="taichi rates only")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
-    arch = init_taichi("cpu")
+    arch = init_taichi(args.arch)
     print(f"taichi arch: {arch}; CPU cores: {os.cpu_count()}; load avg: {os.getloadavg()}")
-    t0 = time.perf_counter()
-    V0, F0, R, t, K, fs = build_scene(rng)
-    print(
-        f"scene: mesh {len(F0)} triangles, free space {fs.area_m2:.1f} m^2 "
-        f"(built in {time.perf_counter() - t0:.1f} s)"
-    )
     n_tk = 500 if args.quick else 2000
     reps = 3 if args.quick else 5
-    cands = sample_candidates(fs, n_tk, rng, "bench")
     cfg = ScoreConfig()
-    V, F = decimate(V0, F0, cfg.max_triangles)
-    print(f"scoring mesh: decimated to {len(F)} triangles (score.max_triangles)\n")
+    if args.scene:
+        V, F, R, t, K, cands = load_scene(args.scene)
+        V0 = F0 = None
+        print(f"scene: {args.scene}, {len(F)} triangles, {len(cands)} candidates\n")
+    else:
+        t0 = time.perf_counter()
+        V0, F0, R, t, K, fs = build_scene(rng)
+        print(
+            f"scene: mesh {len(F0)} triangles, free space {fs.area_m2:.1f} m^2 "
+            f"(built in {time.perf_counter() - t0:.1f} s)"
+        )
+        cands = sample_candidates(fs, n_tk, rng, "bench")
+        V, F = decimate(V0, F0, cfg.max_triangles)
+        print(f"scoring mesh: decimated to {len(F)} triangles (score.max_triangles)\n")
+        if args.export:
+            save_scene(args.export, V, F, R, t, K, cands)
+            print(f"written {args.export}")
+            return
 
     # --- scaling table (includes the acceptance point 80x60, 100 sources) -------------------
     head = (
@@ -124,10 +156,14 @@ def main() -> None:
     print("-" * len(head))
     for w, h in RESOLUTIONS:
         for S in SOURCES:
-            tk, ref = scorers(V, F, R, t, K, w, h, S, cfg.batch_size)
+            tk, ref = scorers(V, F, R, t, K, w, h, S, cfg.batch_size, args.arch,
+                              not args.no_reference)  # fmt: skip
             tk.score(cands[: cfg.batch_size])  # compile
             n = n_tk if (w * h * S) <= 80 * 60 * 100 else n_tk // 2
             tw, tc = rate(lambda n=n, tk=tk: tk.score(cands[:n]), n, reps)
+            if ref is None:
+                print(f"{w:>4}x{h:<3} {S:>4} | {tw:9.0f} {tc:8.0f} |")
+                continue
             # the reference on a subset sized to ~2 s of work at ~40 evals/s for 80x60/100
             m = int(np.clip(80 * (80 * 60 * 100) / (w * h * S), 4, 120))
             if args.quick:
@@ -140,6 +176,8 @@ def main() -> None:
                 f"{w:>4}x{h:<3} {S:>4} | {tw:9.0f} {tc:8.0f} | {nw:8.1f} {nc:7.1f} | "
                 f"{tw / nw:6.1f} {tc / nc:9.1f} | {np.nanmean(d):10.4f} {np.nanmax(d):7.3f}"
             )
+    if V0 is None:
+        return
 
     # --- decimation: scores on a decimated mesh against the full mesh (taichi, 80x60) ------
     print(
@@ -156,7 +194,7 @@ def main() -> None:
         Vd, Fd = decimate(V0, F0, n_tri)
         sv, size = source_views_for_depth(R[:100], t[:100], [K] * 100, cfg.source_depth_width)
         tk = TaichiScorer(
-            Vd, Fd, sv, size, K.scaled(80, 60), batch_size=cfg.batch_size, backend="cpu"
+            Vd, Fd, sv, size, K.scaled(80, 60), batch_size=cfg.batch_size, backend=args.arch
         )
         tk.score(cands[: cfg.batch_size])
         s = tk.score(cands[:nd]).score_deg
