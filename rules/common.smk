@@ -135,10 +135,11 @@ def previous_round(wildcards):
 
 
 def previous_goals(wildcards):
-    """Round r-1's goals.json (none for round 0): the goals stage compares the rounds' mean
-    view scores (goals.min_score_gain, diminishing returns)."""
+    """Round r-1's goals.json and free space (none for round 0): the goals stage compares the
+    rounds' mean view scores and free space (goals.min_score_gain, min_area_gain)."""
     r = int(wildcards.r)
-    return [f"{RESULTS}/round_{r - 1:03d}/goals.json"] if r > 0 else []
+    prev = f"{RESULTS}/round_{r - 1:03d}"
+    return [f"{prev}/goals.json", f"{prev}/freespace.npz"] if r > 0 else []
 
 
 def captures_until(wildcards):

@@ -23,6 +23,7 @@ from scenebot.score.stage import (
     MeshOutputs,
     ScoreInputs,
     ScoreOutputs,
+    diminishing_returns,
     run_goals,
     run_mesh,
     run_score,
@@ -244,3 +245,44 @@ def test_a_round_that_added_no_photo_shows_no_diminishing_returns(
     assert ("not_applied" in doc["score_gain"]) is not complete
     if not complete:
         assert "added no photo" in doc["score_gain"]["not_applied"]
+
+
+def _raster(x0, y0, x1, y1, origin=(-3.0, -3.0), res=0.05, shape=(140, 160), extra=()):
+    """A free-space raster free inside the boxes (x0, y0, x1, y1), (m)."""
+    fs = FreeSpace(np.zeros(shape, bool), np.array(origin), res, np.zeros((0, 2, 2)), 0.0)
+    jj, ii = np.mgrid[0 : shape[0], 0 : shape[1]]
+    cx, cy = origin[0] + (ii + 0.5) * res, origin[1] + (jj + 0.5) * res
+    for bx0, by0, bx1, by1 in [(x0, y0, x1, y1), *extra]:
+        fs.mask |= (cx >= bx0) & (cx < bx1) & (cy >= by0) & (cy < by1)
+    return fs
+
+
+def test_new_free_area_counts_a_corridor_and_not_a_moving_outline():
+    room = _raster(-1.0, -1.0, 1.0, 1.0)
+    # the outline moved 10 cm (a better map): nothing new
+    assert _raster(-1.1, -1.1, 1.1, 1.1).new_area_m2(room, 0.3) == 0.0
+    assert _raster(-1.1, -1.1, 1.1, 1.1).new_area_m2(room, 0.0) == pytest.approx(0.84, abs=0.02)
+    # walls closed in by 20 cm, and a corridor 0.5 m wide opened to y = 2 m beyond the old
+    # north wall (y = 1 m); another raster origin and shape: only the part beyond y = 1.3 m
+    # lies farther than 30 cm from the old free space
+    now = _raster(-0.8, -0.8, 0.8, 0.8, origin=(-2.52, -2.47), shape=(120, 110),
+                  extra=[(-0.25, 0.8, 0.25, 2.0)])  # fmt: skip
+    assert now.area_m2 < room.area_m2
+    assert now.new_area_m2(room, 0.3) == pytest.approx(0.7 * 0.5, abs=0.03)
+
+
+@pytest.mark.parametrize(("new_area", "complete"), [(None, True), (0.05, True), (0.14, False)])
+def test_new_space_keeps_exploration_going_even_when_the_free_area_shrank(new_area, complete):
+    prev = {"mean_score_deg": 45.4, "free_area_m2": 10.5}
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "goals.json"
+        p.write_text(json.dumps(prev))
+        out = diminishing_returns(47.2, 9.24, p, 0.15, 0.1, None,
+                                  None if new_area is None else new_area * 10.5)  # fmt: skip
+    assert out["area_gain"] == pytest.approx(-0.12, abs=0.01)
+    assert out["complete"] is complete
+    if new_area is not None:
+        assert out["new_area_gain"] == pytest.approx(new_area)

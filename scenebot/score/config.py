@@ -147,9 +147,17 @@ class GoalsConfig(BaseModel):
     min_area_gain: float = Field(
         0.1,
         ge=0.0,
-        description="See min_score_gain: a round whose photos grew the free space by this "
-        "fraction or more opened space the map did not know (another room), and exploration "
-        "goes on.",
+        description="See min_score_gain: a round whose photos added free space the map did "
+        "not know (farther than new_area_margin_m from the previous round's free space) of "
+        "this fraction of the previous free area or more opened space (another room, a "
+        "corridor), and exploration goes on. Without the previous round's free space: the "
+        "net growth of the free area.",
+    )
+    new_area_margin_m: float = Field(
+        0.3,
+        ge=0.0,
+        description="Free space within this distance (m) of the previous round's does not "
+        "count as new (its outline moves a little as the map improves).",
     )
     min_seen_fraction: float = Field(
         0.4,

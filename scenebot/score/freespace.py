@@ -124,6 +124,22 @@ class FreeSpace:
         clear = point_segment_distance(xy, self.segments) >= self.robot_radius
         return inside & clear
 
+    def new_area_m2(self, previous: FreeSpace, margin_m: float) -> float:
+        """Free area (m^2) farther than ``margin_m`` from ``previous``'s free cells: space
+        this round's map knows and the previous round's did not (the rasters may differ)."""
+        import cv2
+
+        k = max(int(np.ceil(margin_m / previous.resolution)), 0)
+        grown = previous.mask.astype(np.uint8)
+        if k > 0:
+            disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
+            grown = cv2.dilate(grown, disk)
+        jj, ii = np.nonzero(self.mask)
+        centres = self.origin + (np.stack([ii, jj], 1) + 0.5) * self.resolution
+        j, i, ok = previous.cell_of(centres)
+        known = ok & (grown[j, i] > 0)
+        return float((~known).sum()) * self.resolution**2
+
     def polygons(self) -> list[list[list[list[float]]]]:
         """Free-space outlines as MultiPolygon coordinates: polygons of [exterior, *holes] rings
         of [x, y] points (m), exteriors counter-clockwise."""

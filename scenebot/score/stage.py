@@ -226,8 +226,14 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     scored = any_valid & np.isfinite(cols["score_deg"])
     mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
     map_images = _registered_images(inputs.sfm_dir)
+    new_area = None
+    prev_fs = None if inputs.previous_goals_json is None else (
+        Path(inputs.previous_goals_json).parent / "freespace.npz")  # fmt: skip
+    if prev_fs is not None and prev_fs.is_file():
+        new_area = fs.new_area_m2(FreeSpace.load(prev_fs), cfg.new_area_margin_m)
     returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
-                                  cfg.min_score_gain, cfg.min_area_gain, map_images)  # fmt: skip
+                                  cfg.min_score_gain, cfg.min_area_gain, map_images,
+                                  new_area)  # fmt: skip
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
@@ -278,17 +284,20 @@ def diminishing_returns(
     min_gain: float,
     min_area_gain: float,
     map_images: int | None = None,
+    new_area_m2: float | None = None,
 ) -> dict | None:
     """What the last round bought, and whether that is too little to go on.
 
     Two measures, each against the previous round's ``goals.json``: the mean view score over
     the candidates (the predicted rendering error averaged over the free space) and the free
-    space's area. Photos of known space lower the mean; photos that open space the map did
-    not know (another room behind a doorway) grow the free space, and raise the mean while
-    the new space is still unphotographed. The map is complete when the mean moved by less
-    than ``min_gain`` (a fraction of the previous mean) either way *and* the free space grew
-    by less than ``min_area_gain``. None for round 0 (no previous ``goals.json``) or when a
-    measure is missing.
+    space. Photos of known space lower the mean; photos that open space the map did not know
+    (another room behind a doorway) add free space, and raise the mean while the new space is
+    still unphotographed. The map is complete when the mean moved by less than ``min_gain``
+    (a fraction of the previous mean) either way *and* the new free space (``new_area_m2``:
+    this round's free space away from the previous round's; without it, the net growth of
+    the free area) is less than ``min_area_gain`` of the previous free area. The net growth
+    alone misses a corridor that opens while the map's walls close in elsewhere. None for
+    round 0 (no previous ``goals.json``) or when a measure is missing.
 
     A round that added no photo to the map (``map_images``, the registered images, no more
     than the previous round's: its goals were not reached) measured nothing, so it cannot
@@ -302,12 +311,16 @@ def diminishing_returns(
         return None
     gain = (prev - mean_score) / prev
     area_gain = (free_area_m2 - prev_area) / prev_area
+    new_gain = None if new_area_m2 is None else new_area_m2 / prev_area
+    grew = area_gain if new_gain is None else new_gain
     out = {"previous_mean_score_deg": prev, "mean_score_deg": round(mean_score, 4),
            "gain": round(gain, 4), "min_gain": min_gain,
            "previous_free_area_m2": prev_area, "free_area_m2": round(free_area_m2, 4),
            "area_gain": round(area_gain, 4), "min_area_gain": min_area_gain,
+           "new_area_m2": None if new_area_m2 is None else round(new_area_m2, 4),
+           "new_area_gain": None if new_gain is None else round(new_gain, 4),
            "complete": bool(min_gain > 0 and abs(gain) < min_gain
-                            and area_gain < min_area_gain)}  # fmt: skip
+                            and grew < min_area_gain)}  # fmt: skip
     prev_images = prev_doc.get("map_images")
     if map_images is not None and prev_images is not None:
         out["map_images"], out["previous_map_images"] = map_images, prev_images
@@ -323,8 +336,9 @@ def diminishing_returns(
             f"diminishing returns: since the previous round the mean view score changed by "
             f"{-100 * gain:+.1f}% ({prev:.1f} -> {mean_score:.1f} deg; goals.min_score_gain "
             f"= {100 * min_gain:.0f}%) and the free space by {100 * area_gain:+.1f}% "
-            f"({prev_area:.1f} -> {free_area_m2:.1f} m^2; goals.min_area_gain = "
-            f"{100 * min_area_gain:.0f}%)"
+            f"({prev_area:.1f} -> {free_area_m2:.1f} m^2"
+            + ("" if new_area_m2 is None else f", {new_area_m2:.2f} m^2 of it new")
+            + f"; goals.min_area_gain = {100 * min_area_gain:.0f}%)"
         )
     return out
 
