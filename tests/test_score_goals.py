@@ -201,7 +201,7 @@ def test_a_round_that_buys_too_little_completes_exploration(
         prev.write_text(json.dumps({"mean_score_deg": previous_mean * mean,
                                     "free_area_m2": previous_area * area}))  # fmt: skip
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1),
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=1),
         GoalsInputs(
             scored_room["so"].candidates_csv,
             scored_room["mo"].freespace_npz,
@@ -231,7 +231,7 @@ def test_a_round_that_added_no_photo_shows_no_diminishing_returns(
     prev.write_text(json.dumps({"mean_score_deg": 1.01 * mean, "free_area_m2": area,
                                 "map_images": previous_images}))  # fmt: skip
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1),
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=1),
         GoalsInputs(
             scored_room["so"].candidates_csv,
             scored_room["mo"].freespace_npz,
@@ -286,3 +286,21 @@ def test_new_space_keeps_exploration_going_even_when_the_free_area_shrank(new_ar
     assert out["complete"] is complete
     if new_area is not None:
         assert out["new_area_gain"] == pytest.approx(new_area)
+
+
+@pytest.mark.parametrize(
+    ("previous_low_rounds", "complete"), [(None, False), (0, False), (1, True)]
+)
+def test_diminishing_returns_must_last_patience_rounds(previous_low_rounds, complete, tmp_path):
+    """goals.patience = 2: one round of low gain does not end the campaign; two in a row do."""
+    prev = {"mean_score_deg": 40.0, "free_area_m2": 20.0}
+    if previous_low_rounds is not None:
+        prev["score_gain"] = {"low_rounds": previous_low_rounds}
+    p = tmp_path / "goals.json"
+    p.write_text(json.dumps(prev))
+    out = diminishing_returns(38.0, 20.2, p, 0.15, 0.1, None, 0.1, patience=2)
+    assert out["low"] and out["low_rounds"] == (previous_low_rounds or 0) + 1
+    assert out["complete"] is complete
+    assert ("2 rounds in a row" in out.get("reason", "")) is complete
+    # a round that bought much resets the count
+    assert diminishing_returns(30.0, 20.2, p, 0.15, 0.1, None, 0.1, patience=2)["low_rounds"] == 0

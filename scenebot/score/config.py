@@ -153,6 +153,13 @@ class GoalsConfig(BaseModel):
         "corridor), and exploration goes on. Without the previous round's free space: the "
         "net growth of the free area.",
     )
+    patience: int = Field(
+        2,
+        ge=1,
+        description="Diminishing returns must hold in this many consecutive rounds: one "
+        "round's gain varies from campaign to campaign (the same office: 12% in one, 22% in "
+        "another), so a single low round does not end the campaign.",
+    )
     new_area_margin_m: float = Field(
         0.3,
         ge=0.0,

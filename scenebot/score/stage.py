@@ -233,7 +233,7 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
         new_area = fs.new_area_m2(FreeSpace.load(prev_fs), cfg.new_area_margin_m)
     returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
                                   cfg.min_score_gain, cfg.min_area_gain, map_images,
-                                  new_area)  # fmt: skip
+                                  new_area, cfg.patience)  # fmt: skip
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
@@ -285,6 +285,7 @@ def diminishing_returns(
     min_area_gain: float,
     map_images: int | None = None,
     new_area_m2: float | None = None,
+    patience: int = 1,
 ) -> dict | None:
     """What the last round bought, and whether that is too little to go on.
 
@@ -298,6 +299,10 @@ def diminishing_returns(
     the free area) is less than ``min_area_gain`` of the previous free area. The net growth
     alone misses a corridor that opens while the map's walls close in elsewhere. None for
     round 0 (no previous ``goals.json``) or when a measure is missing.
+
+    One round's gain is noisy, so the map is complete only when the gain was that low in
+    ``patience`` consecutive rounds (``low_rounds`` counts them; the previous round's count
+    comes from its ``goals.json``).
 
     A round that added no photo to the map (``map_images``, the registered images, no more
     than the previous round's: its goals were not reached) measured nothing, so it cannot
@@ -319,13 +324,16 @@ def diminishing_returns(
            "area_gain": round(area_gain, 4), "min_area_gain": min_area_gain,
            "new_area_m2": None if new_area_m2 is None else round(new_area_m2, 4),
            "new_area_gain": None if new_gain is None else round(new_gain, 4),
-           "complete": bool(min_gain > 0 and abs(gain) < min_gain
-                            and grew < min_area_gain)}  # fmt: skip
+           "low": bool(min_gain > 0 and abs(gain) < min_gain and grew < min_area_gain)}  # fmt: skip
+    prev_low = int((prev_doc.get("score_gain") or {}).get("low_rounds", 0))
+    out["low_rounds"] = prev_low + 1 if out["low"] else 0
+    out["patience"] = patience
+    out["complete"] = out["low_rounds"] >= max(patience, 1)
     prev_images = prev_doc.get("map_images")
     if map_images is not None and prev_images is not None:
         out["map_images"], out["previous_map_images"] = map_images, prev_images
         if map_images <= prev_images:
-            out["complete"] = False
+            out["low"], out["low_rounds"], out["complete"] = False, prev_low, False
             out["not_applied"] = (
                 f"the last round added no photo to the map ({prev_images} -> {map_images} "
                 "registered images: its goals were not reached), so no change in the score "
@@ -339,7 +347,9 @@ def diminishing_returns(
             f"({prev_area:.1f} -> {free_area_m2:.1f} m^2"
             + ("" if new_area_m2 is None else f", {new_area_m2:.2f} m^2 of it new")
             + f"; goals.min_area_gain = {100 * min_area_gain:.0f}%)"
-        )
+            + ("" if patience <= 1 else f", {out['low_rounds']} rounds in a row "
+               f"(goals.patience = {patience})")
+        )  # fmt: skip
     return out
 
 
