@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from scenebot.dense.config import PlaneFillConfig
 from scenebot.dense.planefill import (
     backproject,
     detect_planes,
@@ -278,6 +279,21 @@ def test_walls_are_snapped_upright_and_floors_flat():
     assert abs(floor_s.normal[2]) > np.cos(np.radians(0.2))
     x_mid = 3.0 + tilt * np.median(yz[:, 1])
     assert abs(-wall_s.offset / wall_s.normal[0]) == pytest.approx(x_mid, abs=0.01)
+
+
+def test_a_wall_fitted_5_degrees_off_stands_upright_with_the_default_snap():
+    """RANSAC over a wall and its copy a few cm in front (a slightly misregistered circle)
+    fits a plane tilted by degrees; the default snap_deg makes it a wall again, which the
+    shadow test can then compare with the other copy."""
+    rng = np.random.default_rng(5)
+    floor = np.c_[rng.uniform(0, 4, (3000, 2)), rng.normal(-0.35, 0.003, 3000)]
+    yz = np.c_[rng.uniform(0, 4, 3000), rng.uniform(-0.35, 2.2, 3000)]
+    wallp = np.c_[3.0 + np.tan(np.radians(5.0)) * yz[:, 1] + rng.normal(0, 0.003, 3000), yz]
+    kw = dict(distance_m=0.02, min_share=0.05, cell_m=0.1)
+    snapped = detect_planes(np.r_[floor, wallp], snap_deg=PlaneFillConfig().snap_deg, **kw)
+    wall = next(p for p in snapped if abs(p.normal[0]) > 0.9)
+    floor_s = next(p for p in snapped if abs(p.normal[2]) > 0.9)
+    assert wall.normal @ floor_s.normal == pytest.approx(0.0, abs=1e-9)  # upright
 
 
 def _ceiling_cloud(rng, n_ceiling=400, sigma=0.01, above=0):
