@@ -346,6 +346,23 @@ def test_no_ceiling_without_its_points_or_with_depth_above_it():
         assert find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, 100, 0.1, 3, 2) is None
 
 
+def test_a_ceiling_of_70_points_is_found_with_the_default_setting():
+    """One office campaign measured about 100 voxel points on its ceiling, another 429; 70
+    are enough by default (``plane_fill.ceiling_min_points``), 40 are not, and the desk
+    below with the walls measured above it is never the ceiling."""
+    from scenebot.dense.planefill import find_ceiling
+
+    n_min = PlaneFillConfig().ceiling_min_points
+    cams = np.zeros((5, 3))
+    for n_ceiling, found in ((70, True), (40, False)):
+        pts, nrm = _ceiling_cloud(np.random.default_rng(7), n_ceiling=n_ceiling, sigma=0.005)
+        planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
+        ceiling = find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, n_min, 0.1, 3, 2)
+        assert (ceiling is not None) is found
+        if found:
+            assert -ceiling.offset / ceiling.normal[2] == pytest.approx(2.25, abs=0.005)
+
+
 def test_of_two_shadow_planes_with_as_many_views_the_one_with_fewer_points_goes():
     from scenebot.dense.planefill import shadow_planes
 
