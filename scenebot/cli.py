@@ -88,7 +88,8 @@ def cmd_goals(args) -> int:
     cfg, r = _config(args), Path(args.round_dir)
     prev = previous_round_dir(r)
     inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz", r / "sfm",
-                         None if prev is None else prev / "goals.json")  # fmt: skip
+                         None if prev is None else prev / "goals.json",
+                         None if prev is None else prev / "freespace.npz")  # fmt: skip
     print(json.dumps(run_goals(cfg.goals, inputs, GoalsOutputs(r / "goals.json", r / "goals.png"))))
     return 0
 

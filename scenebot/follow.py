@@ -28,6 +28,7 @@ and planning are injected callables, so the same code runs on the simulator and 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -150,6 +151,8 @@ class PathFollower:
             fix, e.g. when the robot may have moved since ``initial_pose`` was known).
     """
 
+    TRAIL_LENGTH = 400  # motions kept for retracing
+
     def __init__(
         self,
         robot: Robot,
@@ -187,8 +190,8 @@ class PathFollower:
         self._fixes_here: list[Pose2D] = []  # fixes since the robot last drove
         self._goal_index = 0
         self._result: FollowResult | None = None
-        # the motions driven so far, as the encoders counted them, for retracing
-        self._trail: list[tuple[str, float]] = []
+        # the latest motions, as the encoders counted them, for retracing
+        self._trail: deque[tuple[str, float]] = deque(maxlen=self.TRAIL_LENGTH)
 
     # ------------------------------------------------------------------ state
     @property
@@ -358,19 +361,22 @@ class PathFollower:
             res.motions += 1
             if res.motions > self.cfg.max_motions:
                 raise _GiveUp(f"more than {self.cfg.max_motions} motion commands for this goal")
-        r = self.robot.drive(amount) if kind == "drive" else self.robot.turn(amount)
-        self._dead_reckon(r.angle_rad if kind == "turn" else 0.0)
+        r = self._move(kind, amount)
         self._trail.append((kind, r.distance_m if kind == "drive" else r.angle_rad))
-        del self._trail[: -self.TRAIL_LENGTH]
-        if kind == "drive":
-            self._since_fix_m += abs(r.distance_m)
-            self._fixes_here.clear()
         if r.status is MotionStatus.LINK_LOST:
             raise _GiveUp("link to the robot lost during a motion")
         return r
 
+    def _move(self, kind: str, amount: float) -> MotionResult:
+        """Drive or turn, and advance the dead reckoning (no goal bookkeeping)."""
+        r = self.robot.drive(amount) if kind == "drive" else self.robot.turn(amount)
+        self._dead_reckon(r.angle_rad if kind == "turn" else 0.0)
+        if kind == "drive":
+            self._since_fix_m += abs(r.distance_m)
+            self._fixes_here.clear()
+        return r
+
     # ------------------------------------------------------------------ obstacles
-    TRAIL_LENGTH = 400  # motions kept for retracing
 
     def retrace(self) -> float:
         """Drive the recorded motions backwards, latest first, until the robot stands
@@ -402,13 +408,9 @@ class PathFollower:
             self._trail.pop()
             if abs(amount) < 1e-6:
                 continue
-            r = self.robot.drive(-amount) if kind == "drive" else self.robot.turn(-amount)
-            self._dead_reckon(r.angle_rad if kind == "turn" else 0.0)
+            r = self._move(kind, -amount)
             motions += 1
-            if kind == "drive":
-                driven += abs(r.distance_m)
-                self._since_fix_m += abs(r.distance_m)
-                self._fixes_here.clear()
+            driven += abs(r.distance_m)
             if r.interrupted:
                 stop = f"{r.status} ({r.bumper or 'no'} bumper)"
                 break

@@ -183,6 +183,7 @@ class GoalsInputs:
     freespace_npz: Path
     sfm_dir: Path | None = None  # the map (camera poses); the frontier method needs it
     previous_goals_json: Path | None = None  # the previous round's (diminishing returns)
+    previous_freespace_npz: Path | None = None  # the previous round's (its new free space)
 
 
 @dataclass
@@ -227,9 +228,8 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
     map_images = _registered_images(inputs.sfm_dir)
     new_area = None
-    prev_fs = None if inputs.previous_goals_json is None else (
-        Path(inputs.previous_goals_json).parent / "freespace.npz")  # fmt: skip
-    if prev_fs is not None and prev_fs.is_file():
+    prev_fs = inputs.previous_freespace_npz
+    if prev_fs is not None and Path(prev_fs).is_file():
         new_area = fs.new_area_m2(FreeSpace.load(prev_fs), cfg.new_area_margin_m)
     returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
                                   cfg.min_score_gain, cfg.min_area_gain, map_images,
@@ -323,22 +323,23 @@ def diminishing_returns(
            "previous_free_area_m2": prev_area, "free_area_m2": round(free_area_m2, 4),
            "area_gain": round(area_gain, 4), "min_area_gain": min_area_gain,
            "new_area_m2": None if new_area_m2 is None else round(new_area_m2, 4),
-           "new_area_gain": None if new_gain is None else round(new_gain, 4),
-           "low": bool(min_gain > 0 and abs(gain) < min_gain and grew < min_area_gain)}  # fmt: skip
+           "new_area_gain": None if new_gain is None else round(new_gain, 4)}  # fmt: skip
     prev_low = int((prev_doc.get("score_gain") or {}).get("low_rounds", 0))
-    out["low_rounds"] = prev_low + 1 if out["low"] else 0
-    out["patience"] = patience
-    out["complete"] = out["low_rounds"] >= max(patience, 1)
     prev_images = prev_doc.get("map_images")
+    no_photo = map_images is not None and prev_images is not None and map_images <= prev_images
     if map_images is not None and prev_images is not None:
         out["map_images"], out["previous_map_images"] = map_images, prev_images
-        if map_images <= prev_images:
-            out["low"], out["low_rounds"], out["complete"] = False, prev_low, False
-            out["not_applied"] = (
-                f"the last round added no photo to the map ({prev_images} -> {map_images} "
-                "registered images: its goals were not reached), so no change in the score "
-                "says nothing about what more photos would bring"
-            )
+    if no_photo:
+        out["not_applied"] = (
+            f"the last round added no photo to the map ({prev_images} -> {map_images} "
+            "registered images: its goals were not reached), so no change in the score "
+            "says nothing about what more photos would bring"
+        )
+    out["low"] = bool(not no_photo and min_gain > 0 and abs(gain) < min_gain
+                      and grew < min_area_gain)  # fmt: skip
+    out["low_rounds"] = prev_low + 1 if out["low"] else (prev_low if no_photo else 0)
+    out["patience"] = patience
+    out["complete"] = not no_photo and out["low_rounds"] >= max(patience, 1)
     if out["complete"]:
         out["reason"] = (
             f"diminishing returns: since the previous round the mean view score changed by "
