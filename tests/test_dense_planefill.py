@@ -475,3 +475,107 @@ def test_the_floor_before_the_camera_is_filled_nearer_than_the_views_depth_range
     fd, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (1.5, 10.0), bounding_planes=True)
     assert (fd[near] > 0).mean() > 0.8
     assert np.allclose(fd[near][fd[near] > 0], truth[near][fd[near] > 0], rtol=1e-3)
+
+
+def _box_observations(rng, n_box=60, n_wall=120):
+    """SfM observations of a view of the wall at 3 m with a box at 1 m covering the
+    central third of the image: (uv (N, 2), z (N,)), and the box's pixel mask."""
+    lo, hi = (W / 3 + 3, H / 3 + 3), (2 * W / 3 - 3, 2 * H / 3 - 3)
+    box_uv = rng.uniform(lo, hi, (n_box, 2))
+    wall_uv = rng.uniform([0, 0], [W, H], (4 * n_wall, 2))
+    in_box = np.all(np.abs(wall_uv - (W / 2, H / 2)) < (W / 6 + 8, H / 6 + 8), axis=1)
+    wall_uv = wall_uv[~in_box][:n_wall]
+    uv = np.r_[box_uv, wall_uv]
+    z = np.r_[np.full(len(box_uv), 1.0), np.full(len(wall_uv), 3.0)]
+    v, u = np.mgrid[0:H, 0:W] + 0.5
+    mask = (np.abs(u - W / 2) < W / 6) & (np.abs(v - H / 2) < H / 6)
+    return uv, z, mask
+
+
+def test_fill_that_the_views_own_sfm_points_contradict_is_emptied():
+    """The wall fill (3 m) painted across a box at 1 m that stereo missed; the view's own
+    SfM points on the box lie 2 m before the fill: the fill between them is emptied, the
+    wall's fill beyond the box is kept, and measured pixels are never touched."""
+    from scenebot.dense.planefill import sparse_contradicted_fill
+
+    rng = np.random.default_rng(3)
+    uv, z, box = _box_observations(rng)
+    d = wall()
+    filled = np.ones_like(d, bool)
+    bad = sparse_contradicted_fill(d, filled, uv, z)
+    v, u = np.mgrid[0:H, 0:W] + 0.5
+    inner = (np.abs(u - W / 2) < W / 6 - 8) & (np.abs(v - H / 2) < H / 6 - 8)
+    assert bad[inner].mean() > 0.95 and bad[box].mean() > 0.6  # between its features
+    far = (np.abs(u - W / 2) > W / 6 + 6) | (np.abs(v - H / 2) > H / 6 + 6)
+    assert not bad[far].any()  # the wall around it keeps its fill
+    assert not sparse_contradicted_fill(d, ~filled, uv, z).any()  # measured pixels stay
+
+
+def test_sfm_points_that_agree_with_the_fill_or_one_stray_point_veto_nothing():
+    """Every observation on the filled wall at its depth (within 5%): nothing is emptied;
+    a single point off the fill empties only its own few pixels."""
+    from scenebot.dense.planefill import sparse_contradicted_fill
+
+    rng = np.random.default_rng(4)
+    uv = rng.uniform([0, 0], [W, H], (200, 2))
+    d = wall()
+    filled = np.ones_like(d, bool)
+    z = np.full(len(uv), 3.0) * rng.uniform(0.98, 1.02, len(uv))
+    assert not sparse_contradicted_fill(d, filled, uv, z).any()
+    z[0] = 1.0
+    assert 0 < sparse_contradicted_fill(d, filled, uv, z).sum() <= 49
+
+
+def test_walls_rise_to_the_ceiling_but_a_doorway_stays_open():
+    """A wall measured up to 2.2 m under a ceiling at 2.5 m: every column rises to the
+    ceiling; a doorway below its lintel and a column with no cell at all stay empty; a
+    floor-parallel plane does not rise."""
+    from scenebot.dense.planefill import Plane, span_to_ceiling
+
+    cell = 0.1
+    basis = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])  # along the wall, down
+    occ = np.ones((40, 22), bool)  # y 0..4 m, z 2.2 (row 0) .. 0 m
+    occ[10:18, 2:] = False  # a doorway up to 2.0 m, its lintel above
+    occ[30, :] = False  # an opening to the ceiling
+    wall = Plane(np.array([1.0, 0, 0]), -3.0, basis, np.array([3.0, 0, 0]), cell,
+                 np.array([0.0, -2.2]), occ.copy(), 1000, boundary=True)  # fmt: skip
+    ceiling = Plane(np.array([0, 0, 1.0]), -2.5, np.eye(3)[:2], np.array([0, 0, 2.5]), cell,
+                    np.zeros(2), np.ones((1, 1), bool), 80, boundary=True)  # fmt: skip
+    added = span_to_ceiling(wall, ceiling)
+    assert added > 0
+
+    def on(y, z):
+        return bool(wall.inside(np.array([[3.0, y, z]]))[0])
+
+    for y in (0.05, 0.55, 1.25, 2.45, 3.95):
+        assert on(y, 2.45) and on(y, 2.3)  # risen to the ceiling
+        assert not on(y, 2.6)  # not past it
+    assert not on(1.45, 1.0) and not on(1.45, 0.1)  # the doorway
+    assert not on(3.05, 2.45) and not on(3.05, 1.0)  # the opening
+    assert on(0.55, 1.0)  # the old cells kept
+    floor = Plane(np.array([0, 0, 1.0]), 0.0, np.eye(3)[:2], np.zeros(3), cell, np.zeros(2),
+                  np.ones((5, 5), bool), 500, boundary=True)  # fmt: skip
+    assert span_to_ceiling(floor, ceiling) == 0
+
+
+def test_the_ceiling_reaches_the_walls_it_meets():
+    """A ceiling spanned from the floor stops 0.5 m short of a wall (furniture on the floor
+    along it); the wall's top edge widens the ceiling to the wall, not past it."""
+    from scenebot.dense.planefill import Plane, span_walls
+
+    cell = 0.1
+    ceiling = Plane(np.array([0, 0, 1.0]), -2.5, np.eye(3)[:2], np.array([0, 0, 2.5]), cell,
+                    np.array([0.0, 0.0]), np.ones((25, 40), bool), 80, boundary=True)  # fmt: skip
+    # x 0..2.5 m (rows), y 0..4 m (columns); the wall at x = 3.0, 0.5 m beyond
+    occ = np.ones((40, 26), bool)  # along y, z 2.55 .. 0 m
+    wall = Plane(np.array([1.0, 0, 0]), -3.0, np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]),
+                 np.array([3.0, 0, 0]), cell, np.array([0.0, -2.55]), occ, 1000,
+                 boundary=True)  # fmt: skip
+    assert span_walls(ceiling, [wall]) > 0
+
+    def on(x, y):
+        return bool(ceiling.inside(np.array([[x, y, 2.5]]))[0])
+
+    for y in (0.65, 2.05, 3.35):  # (an open end of the strip is left to the next wall)
+        assert on(1.0, y) and on(2.75, y) and on(2.95, y)  # the strip along the wall
+        assert not on(3.35, y)  # not past the wall

@@ -195,6 +195,26 @@ class PlaneFillConfig(BaseModel):
         "measured depth of all views projected into the view's cell (cell_px; a plain object "
         "that the fill spread across, whose texture other views measured); 0: no check.",
     )
+    sparse_veto: bool = Field(
+        True,
+        description="Empty again the filled pixels that the view's own SfM points contradict "
+        "(a close object stereo missed, its features in front of the filled wall): the "
+        "Delaunay triangles of the view's observations whose three corners lie off the fill "
+        "by > 5% (planefill.sparse_contradicted_fill).",
+    )
+    walls_to_ceiling_m: float = Field(
+        1.2,
+        ge=0,
+        description="With a ceiling found: the room's walls (boundary planes) rise to it from "
+        "their highest measured cells when it is less than this (m) above them (a level "
+        "camera measures the top of a wall only from across the room; "
+        "planefill.span_to_ceiling); 0: off.",
+    )
+    sparse_veto_max_edge_px: float = Field(
+        120.0,
+        gt=0,
+        description="Longest triangle edge (px, at the dense image size) of sparse_veto.",
+    )
     min_votes: int = Field(
         2, ge=1, le=8, description="Of the 8 directions, this many must find the same plane ..."
     )
@@ -298,7 +318,10 @@ class DenseConfig(BaseModel):
     num_threads: int = Field(-1, description="CPU threads for taichi and fusion (-1 = all).")
     patchmatch: PatchMatchConfig = Field(default_factory=PatchMatchConfig)
     fusion_min_num_pixels: int = Field(
-        3, ge=1, description="Fusion: minimum consistent pixels for a fused point."
+        2,
+        ge=1,
+        description="Fusion: minimum consistent pixels for a fused point (2: seen alike by "
+        "two views; the top of a wall or a ceiling strip is often seen by only two).",
     )
     fusion_max_reproj_error: float = Field(
         2.0, gt=0, description="Fusion: maximum reprojection error, pixels."

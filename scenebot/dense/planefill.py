@@ -23,7 +23,10 @@ carpet). This step, between depth estimation and fusion:
 2. **Extents** (``extent: carved_hull``): the room's boundary planes (walls, floor, ceiling:
    almost nothing measured past them) span the convex hull of their cells, less the cells
    that measured depth is seen through (a doorway). A plain wall then reaches between its
-   posters and corners; a box face keeps its own cells (:func:`carved_hulls`).
+   posters and corners; a box face keeps its own cells (:func:`carved_hulls`). With a
+   ceiling, the walls rise to it (``walls_to_ceiling_m``, :func:`span_to_ceiling`: a level
+   camera measures the top of a wall only from across the room), and the ceiling reaches
+   their top edges (:func:`span_walls`: the floor along a wall is often under furniture).
 3. **Labels**: a measured pixel carries the label of the plane it lies on (within
    ``distance_m`` or ``rel_distance`` of its depth), or "off-plane". An object's face that
    this view sees through (more of its measured depth behind the face than on it) is wrong
@@ -46,7 +49,10 @@ carpet). This step, between depth estimation and fusion:
    cells whose neighbours the first pass lacked.
 6. **Occlusion**: a filled pixel behind the depth that all views measured, projected into
    this view (``occlusion_min_points`` in its cell), lies behind a surface (a plain object
-   the fill spread across) and is emptied again (:func:`occluded_fill`).
+   the fill spread across) and is emptied again (:func:`occluded_fill`). So is a fill that
+   the view's own SfM points contradict (``sparse_veto``): a close object that stereo
+   missed, whose features lie in the photo in front of the wall the fill painted there
+   (:func:`sparse_contradicted_fill`).
 
 Fusion then needs the usual agreement of ``dense.fusion_min_num_pixels`` views, so a plane
 is only fused where several views filled it alike. The measured maps are kept in
@@ -413,6 +419,97 @@ def span_floor(ceiling: Plane, floor: Plane) -> None:
     occ = np.zeros(ij.max(0) + 2, bool)
     occ[ij[:, 0], ij[:, 1]] = True
     ceiling.lo, ceiling.occupied = lo, binary_closing(occ, iterations=1) | occ
+
+
+def span_to_ceiling(wall: Plane, ceiling: Plane, max_rise_m: float = 1.2) -> int:
+    """Raise a boundary wall's extent (in place) to the ceiling: every column of its raster
+    rises from its highest cell up to the ceiling's height when that is less than
+    ``max_rise_m`` above it.
+
+    A level camera measures the top of a wall only from across the room, at grazing angles:
+    its extent ends a few decimetres below the ceiling, though a room's walls meet it. Only
+    upwards: a doorway between the floor and a lintel stays open, and a column with no cell
+    (an opening to the ceiling) does not rise.
+
+    Returns:
+        The number of cells added.
+    """
+    up = ceiling.normal / np.linalg.norm(ceiling.normal)
+    if abs(float(wall.normal @ up)) > np.sin(np.radians(10.0)):
+        return 0  # not a wall
+    h_ceiling = -ceiling.offset
+    cells = np.argwhere(wall.occupied)
+    if not len(cells):
+        return 0
+    X = wall.origin + (wall.lo + (cells + 0.5) * wall.cell_m) @ wall.basis
+    h = X @ up
+    rise = up - (up @ wall.normal) * wall.normal
+    rise /= np.linalg.norm(rise)
+    new = []
+    for i in np.unique(cells[:, 0]):
+        col = cells[:, 0] == i
+        k = int(np.argmax(np.where(col, h, -np.inf)))
+        gap = h_ceiling - h[k]
+        if 0 < gap < max_rise_m:
+            steps = np.arange(1, int(np.ceil(gap / wall.cell_m)) + 1) * wall.cell_m
+            top = X[k] + np.outer(np.minimum(steps, gap - 0.25 * wall.cell_m), rise)
+            new.append(top)
+    if not new:
+        return 0
+    p2 = wall.to_2d(np.concatenate(new))
+    ij = np.floor((p2 - wall.lo) / wall.cell_m).astype(np.int64)
+    shift = np.maximum(-ij.min(0), 0)  # grow the raster by whole cells, grid kept
+    ij = ij + shift
+    shape = np.maximum(np.array(wall.occupied.shape) + shift, ij.max(0) + 1)
+    occ = np.zeros(shape, bool)
+    occ[
+        shift[0] : shift[0] + wall.occupied.shape[0], shift[1] : shift[1] + wall.occupied.shape[1]
+    ] = wall.occupied
+    before = int(occ.sum())
+    occ[ij[:, 0], ij[:, 1]] = True
+    wall.lo = wall.lo - shift * wall.cell_m
+    wall.occupied = occ
+    return int(occ.sum()) - before
+
+
+def span_walls(ceiling: Plane, walls: list[Plane], bridge_m: float = 0.6) -> int:
+    """Widen a ceiling's extent (in place) to the top edges of the room's walls: their cells
+    projected onto it, and the gaps between them and the ceiling's cells up to
+    ``bridge_m`` closed. The floor along a wall is often under furniture, so the ceiling
+    spanned from the floor (:func:`span_floor`) stops short of the wall it meets.
+
+    Returns:
+        The number of cells added.
+    """
+    from scipy.ndimage import binary_closing
+
+    up = ceiling.normal / np.linalg.norm(ceiling.normal)
+    tops = []
+    for w in walls:
+        if abs(float(w.normal @ up)) > np.sin(np.radians(10.0)):
+            continue
+        cells = np.argwhere(w.occupied)
+        if not len(cells):
+            continue
+        X = w.origin + (w.lo + (cells + 0.5) * w.cell_m) @ w.basis
+        near = X @ up + ceiling.offset > -2 * w.cell_m  # the wall's cells at the ceiling
+        tops.append(X[near])
+    if not tops or not sum(len(t) for t in tops):
+        return 0
+    own = np.argwhere(ceiling.occupied)
+    p_own = ceiling.lo + (own + 0.5) * ceiling.cell_m
+    p_top = ceiling.to_2d(np.concatenate(tops))
+    lo = np.minimum(ceiling.lo, np.floor((p_top.min(0) - ceiling.lo) / ceiling.cell_m - 1)
+                    * ceiling.cell_m + ceiling.lo)  # fmt: skip
+    p2 = np.concatenate([p_own, p_top])
+    ij = np.floor((p2 - lo) / ceiling.cell_m).astype(np.int64)
+    pad = int(np.ceil(bridge_m / ceiling.cell_m))
+    occ = np.zeros(ij.max(0) + 1 + 2 * pad, bool)
+    occ[ij[:, 0] + pad, ij[:, 1] + pad] = True
+    before = int(ceiling.occupied.sum())
+    occ = binary_closing(occ, iterations=int(np.ceil(pad / 2))) | occ
+    ceiling.lo, ceiling.occupied = lo - pad * ceiling.cell_m, occ
+    return int(occ.sum()) - before
 
 
 def backproject(depth: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -979,6 +1076,103 @@ def occluded_fill(
     return filled & (depth * (1 - rel) - margin_m > near_px)
 
 
+def sparse_observations(sparse_dir: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per image name, the SfM points it observes: pixel positions (N, 2) as fractions of
+    the image's width and height, and their depths along its optical axis (N,), from the
+    dense workspace's undistorted model."""
+    import pycolmap
+
+    rec = pycolmap.Reconstruction(str(sparse_dir))
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for iid in rec.reg_image_ids():
+        im = rec.image(iid)
+        obs = [(p.xy, p.point3D_id) for p in im.points2D if p.has_point3D()]
+        if not obs:
+            out[im.name] = (np.zeros((0, 2)), np.zeros(0))
+            continue
+        cam = rec.camera(im.camera_id)
+        xy = np.array([o[0] for o in obs], np.float64) / [cam.width, cam.height]
+        X = np.array([rec.point3D(o[1]).xyz for o in obs], np.float64)
+        out[im.name] = (xy, (im.cam_from_world() * X)[:, 2])
+    return out
+
+
+def _contradicted_triangles(
+    depth: np.ndarray,
+    filled: np.ndarray,
+    uv: np.ndarray,
+    z: np.ndarray,
+    rel: float,
+    margin_m: float,
+    max_edge_px: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The contradicted observations (N,) bool and the Delaunay triangles (T, 3) of the
+    view's observations whose corners are all contradicted, no edge over ``max_edge_px``."""
+    from scipy.spatial import Delaunay, QhullError
+
+    h, w = depth.shape
+    u = np.clip(uv[:, 0].astype(np.int64), 0, w - 1)
+    v = np.clip(uv[:, 1].astype(np.int64), 0, h - 1)
+    d = depth[v, u]
+    bad = filled[v, u] & (d > 0) & (np.abs(z - d) > rel * d + margin_m)
+    tri = np.zeros((0, 3), np.int64)
+    if bad.sum() >= 3:
+        try:
+            tri = Delaunay(uv).simplices
+        except QhullError:  # degenerate (collinear) points
+            tri = np.zeros((0, 3), np.int64)
+        tri = tri[bad[tri].all(1)]
+        if len(tri):
+            corners = uv[tri]
+            edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(1)
+            tri = tri[edge <= max_edge_px]
+    return bad, tri
+
+
+def sparse_contradicted_fill(
+    depth: np.ndarray,
+    filled: np.ndarray,
+    uv: np.ndarray,
+    z: np.ndarray,
+    rel: float = 0.05,
+    margin_m: float = 0.03,
+    max_edge_px: float = 120.0,
+) -> np.ndarray:
+    """Filled pixels that the view's own SfM points contradict.
+
+    The SfM points a photo observes are features matched and triangulated across several
+    photos: where the photo shows a close object that multi-view stereo missed (a box,
+    a bookcase seen from nearby, whose source views did not see it), the plane fill paints
+    the wall behind it, yet the object's features lie in the photo, in front of that fill.
+    The points are triangulated in the image (Delaunay); each is *contradicted* when it
+    lies on a filled pixel, nearer or farther than the fill by more than ``rel`` of the
+    depth and ``margin_m``. A triangle whose three corners are contradicted, with no edge
+    longer than ``max_edge_px``, covers a surface that is not the filled plane: its filled
+    pixels are returned (and the filled pixels within 3 px of a contradicted point).
+
+    Args:
+        depth: (H, W) the filled depth map.
+        filled: (H, W) bool: which of its pixels the plane fill set.
+        uv: (N, 2) pixel positions of the view's SfM observations (x right, y down; pixel
+            centres at +0.5, COLMAP's convention).
+        z: (N,) their depths.
+
+    Returns:
+        (H, W) bool: the filled pixels to empty again.
+    """
+    import cv2
+
+    out = np.zeros(depth.shape, np.uint8)
+    if not filled.any() or len(z) == 0:
+        return out.astype(bool)
+    bad, tri = _contradicted_triangles(depth, filled, uv, z, rel, margin_m, max_edge_px)
+    for k in np.flatnonzero(bad):  # the point's own neighbourhood
+        cv2.circle(out, (int(uv[k, 0]), int(uv[k, 1])), 3, 1, -1)
+    for c in uv[tri]:
+        cv2.fillConvexPoly(out, np.round(c - 0.5).astype(np.int32), 1)
+    return out.astype(bool) & filled
+
+
 def plane_fill(
     dense_dir: Path,
     views: list,
@@ -1091,6 +1285,11 @@ def plane_fill(
                      and abs(p.normal @ ceiling.normal) > 0.999]  # fmt: skip
             if level:  # the floor: the largest boundary plane parallel to the ceiling
                 span_floor(ceiling, max(level, key=lambda p: p.inliers))
+            if cfg.walls_to_ceiling_m > 0:
+                walls = [p for p in planes if p is not ceiling and p.boundary]
+                for p in walls:
+                    span_to_ceiling(p, ceiling, cfg.walls_to_ceiling_m)
+                span_walls(ceiling, walls)
     if cfg.drop_phantoms and cfg.shadow_gap_m > 0 and planes:
         shadows = shadow_planes(planes, support, cfg.shadow_gap_m, cfg.merge_angle_deg)
         for j, why in shadows.items():
@@ -1102,8 +1301,11 @@ def plane_fill(
             )
         planes = [p for j, p in enumerate(planes) if j not in shadows]
     LOG.info("dense: %d planes in %d voxel points", len(planes), len(cloud))
+    observed: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    if cfg.sparse_veto and (dense_dir / "sparse").is_dir():
+        observed = sparse_observations(dense_dir / "sparse")
     per_view = []
-    total_px = total_measured = total_filled = total_culled = 0
+    total_px = total_measured = total_filled = total_culled = total_vetoed = 0
     for name, K, R, t, rng_d in tqdm(views, desc="plane fill", unit="view", disable=not progress):
         d, n = measured(name)
         fd, fn, filled, culled = d, n, 0, 0
@@ -1127,11 +1329,21 @@ def plane_fill(
                                 min_points=cfg.occlusion_min_points)  # fmt: skip
             fd[bad], fn[bad] = 0, 0
             filled -= int(bad.sum())
+        vetoed = 0
+        if filled and name in observed:
+            uv_obs, z_obs = observed[name]
+            uv_obs = uv_obs * fd.shape[::-1]
+            bad = sparse_contradicted_fill(fd, (fd > 0) & ~(d > 0), uv_obs, z_obs,
+                                           max_edge_px=cfg.sparse_veto_max_edge_px)  # fmt: skip
+            fd[bad], fn[bad] = 0, 0
+            vetoed = int(bad.sum())
+            filled -= vetoed
+        total_vetoed += vetoed
         write_array(ws.map_path(dense_dir, "depth", name, "geometric"), fd)
         write_array(ws.map_path(dense_dir, "normal", name, "geometric"), fn)
         n_meas = int((d > 0).sum())
         per_view.append({"name": name, "measured": n_meas / d.size, "filled": filled / d.size,
-                         "culled": culled / d.size})  # fmt: skip
+                         "culled": culled / d.size, "vetoed": vetoed / d.size})  # fmt: skip
         total_culled += culled
         total_px += d.size
         total_measured += n_meas
@@ -1147,6 +1359,7 @@ def plane_fill(
         "measured_fraction": total_measured / max(total_px, 1),
         "filled_fraction": total_filled / max(total_px, 1),
         "culled_fraction": total_culled / max(total_px, 1),
+        "vetoed_fraction": total_vetoed / max(total_px, 1),
         "views": per_view,
         "seconds": time.perf_counter() - t0,
     }
