@@ -12,7 +12,7 @@ rule observable:
         png=report(
             f"{RESULTS}/eval/observable_surface.png",
             caption="../report/observable_surface.rst",
-            category="6. Evaluation",
+            category="7. Evaluation",
             subcategory="truth",
         ),
     log:
@@ -41,7 +41,7 @@ rule evaluate:
         png=report(
             f"{RESULTS}/round_{{r}}/evaluation.png",
             caption="../report/evaluation.rst",
-            category="6. Evaluation",
+            category="7. Evaluation",
             subcategory="round {r}",
         ),
     log:
@@ -74,7 +74,7 @@ rule evaluate_final:
         png=report(
             f"{RESULTS}/final/evaluation.png",
             caption="../report/evaluation_final.rst",
-            category="6. Evaluation",
+            category="7. Evaluation",
             subcategory="final",
         ),
     log:
@@ -120,7 +120,7 @@ rule validity:
         png=report(
             f"{RESULTS}/final/score_validity.png",
             caption="../report/score_validity.rst",
-            category="6. Evaluation",
+            category="7. Evaluation",
             subcategory="final",
         ),
     log:
@@ -157,7 +157,7 @@ rule baselines:
         png=report(
             f"{RESULTS}/baselines/baselines.png",
             caption="../report/baselines.rst",
-            category="6. Evaluation",
+            category="7. Evaluation",
             subcategory="baselines",
         ),
     log:

@@ -37,6 +37,21 @@ rule dense:
         model=last_round_model,
     output:
         fused=f"{RESULTS}/final/dense/fused.ply",
+        views=report(
+            f"{RESULTS}/final/dense/fused_views.png",
+            caption="../report/dense_views.rst",
+            category="5. Dense model",
+        ),
+        mosaic=report(
+            f"{RESULTS}/final/dense/depth_normal_mosaic.png",
+            caption="../report/dense_mosaic.rst",
+            category="5. Dense model",
+        ),
+        planes=report(
+            f"{RESULTS}/final/dense/planes.png",
+            caption="../report/dense_planes.rst",
+            category="5. Dense model",
+        ),
     log:
         f"{RESULTS}/logs/dense.log",
     benchmark:

@@ -12,7 +12,7 @@ rule tour:
         video=report(
             f"{RESULTS}/final/tour/tour.mp4",
             caption="../report/tour.rst",
-            category="5. Tour",
+            category="6. Tour",
         ),
         index=f"{RESULTS}/final/tour/index.html",
         data=f"{RESULTS}/final/tour/tour_data.js",

@@ -213,6 +213,7 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
     expected = {"campaign.png", "campaign.json", "eval/observable_surface.png"}
     expected |= {"final/tour/tour.mp4", "final/evaluation.png"}
     expected.add("final/score_validity.png")
+    expected |= {f"final/dense/{f}.png" for f in ("fused_views", "depth_normal_mosaic", "planes")}
     for r in rounds:
         d = f"round_{r:03d}"
         expected |= {f"{d}/{f}" for f in ("sfm/map.png", "evaluation.png", "candidates.csv")}

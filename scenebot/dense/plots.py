@@ -1,4 +1,5 @@
-"""Pictures of the dense stage: renders of the fused cloud and a depth/normal mosaic."""
+"""Pictures of the dense stage: renders of the fused cloud, a depth/normal mosaic and the
+plane fill's planes seen from above."""
 
 from __future__ import annotations
 
@@ -141,7 +142,7 @@ def plot_depth_mosaic(
         dm = np.where(valid, depth, np.nan)
         im = row[1].imshow(dm, cmap="turbo")
         title = f"depth [m], {100 * valid.mean():.0f}% of pixels"
-        measured = dense_dir / "stereo" / "depth_maps_measured" / f"{name}.geometric.bin"
+        measured = dense_dir / "stereo" / "depth_maps_measured" / f"{Path(name).name}.geometric.bin"
         if measured.is_file():  # plane completion ran: say how much was measured
             title += f" ({100 * np.mean(read_array(measured) > 0):.0f}% measured)"
         row[1].set_title(title)
@@ -150,6 +151,54 @@ def plot_depth_mosaic(
         row[2].set_title("normal (camera frame)")
         for a in row:
             a.axis("off")
+    fig.tight_layout()
+    fig.savefig(str(out), dpi=90)
+    plt.close(fig)
+
+
+def plot_planes(planes_npz: str | Path | None, out: str | Path) -> None:
+    """Top view of the plane fill's planes (:func:`scenebot.dense.planefill.save_planes`):
+    the floor's and the ceiling's extents, each wall's and object face's extent (its cells
+    seen from above, so a wall is a line), and the camera centres, in the map frame.
+    ``planes_npz`` None: the plane fill is off, and the picture says so."""
+    from scenebot.dense.planefill import load_planes
+
+    fig, ax = plt.subplots(figsize=(8, 7))
+    if planes_npz is None:
+        ax.text(0.5, 0.5, "plane fill off (dense.plane_fill.enabled: false)", ha="center")
+        ax.axis("off")
+        fig.savefig(str(out), dpi=90)
+        plt.close(fig)
+        return
+    planes, centres = load_planes(Path(planes_npz))
+    colours = plt.get_cmap("tab10")
+    k_wall = 0
+    for pl, is_ceiling in planes:
+        cells = np.argwhere(pl.occupied)
+        if not len(cells):
+            continue
+        X = pl.origin + (pl.lo + (cells + 0.5) * pl.cell_m) @ pl.basis
+        level = abs(pl.normal[2]) > 0.9
+        label = f"{pl.area_m2:.1f} m^2, {pl.inliers} points"
+        if is_ceiling:
+            ax.scatter(X[:, 0], X[:, 1], s=4, marker="s", facecolors="none", linewidths=0.4,
+                       edgecolors="tab:blue", label=f"ceiling ({label})")  # fmt: skip
+        elif level:
+            kind = "floor" if pl.boundary else "level face"
+            ax.scatter(X[:, 0], X[:, 1], s=4, marker="s", color="0.8" if pl.boundary else "0.5",
+                       label=f"{kind} ({label})")  # fmt: skip
+        else:
+            kind = "wall" if pl.boundary else "object face"
+            ax.scatter(X[:, 0], X[:, 1], s=3, color=colours(k_wall % 10),
+                       label=f"{kind} ({label})")  # fmt: skip
+            k_wall += 1
+    if len(centres):
+        ax.scatter(centres[:, 0], centres[:, 1], s=3, color="k", label="cameras")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (map)")
+    ax.set_ylabel("y [m] (map)")
+    ax.set_title("plane fill: the planes' extents seen from above")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), markerscale=3)
     fig.tight_layout()
     fig.savefig(str(out), dpi=90)
     plt.close(fig)

@@ -8,7 +8,8 @@ Entry point :func:`run`. Writes under ``outputs.dense_dir`` (``results/{scene}/f
 * ``fused.ply`` (+ ``fused.ply.vis``) from ``pycolmap.stereo_fusion`` (runs on CPU),
 * optionally ``meshed-poisson.ply``,
 * ``dense_summary.json`` (backend, per-view sources, depth ranges, coverage, timings),
-* with ``plots``: ``fused_views.png`` and ``depth_normal_mosaic.png``.
+* with ``plots``: ``fused_views.png``, ``depth_normal_mosaic.png`` and, with the plane
+  fill, ``planes.png`` (its planes from above; the planes themselves in ``plane_fill.npz``).
 """
 
 from __future__ import annotations
@@ -321,5 +322,12 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
         plots.plot_depth_mosaic(
             dense_dir, [p.name for p in plans], dense_dir / "depth_normal_mosaic.png"
         )
+        from scenebot.dense.planefill import PLANES_NPZ
+
+        planes_npz = dense_dir / PLANES_NPZ
+        if fill_stats is None:
+            planes_npz.unlink(missing_ok=True)  # a previous run's planes are not this run's
+        plots.plot_planes(planes_npz if fill_stats is not None else None,
+                          dense_dir / "planes.png")  # fmt: skip
     outputs.summary_json.write_text(json.dumps(summary, indent=1))
     return summary
