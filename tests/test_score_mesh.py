@@ -1,5 +1,6 @@
 """Mesh, free space and candidates of a synthetic room with a known geometry."""
 
+import itertools
 import json
 import os
 
@@ -167,3 +168,42 @@ def test_points_hundreds_of_metres_out_are_left_out_of_the_mesh(tmp_path, caplog
     # kept, they swamp Poisson's octree (the room's mesh comes out empty) or the raster
     with pytest.raises((FreeSpaceError, MeshError)):
         run_mesh(MeshConfig(max_point_range_m=1e4), MeshInputs(sfm), outputs("all"))
+
+
+def _walls(polyline, z=(-0.5, 2.0)):
+    """Vertical wall quads along a 2D polyline: (V, F)."""
+    V, F = [], []
+    for (x0, y0), (x1, y1) in itertools.pairwise(polyline):
+        k = len(V)
+        V += [[x0, y0, z[0]], [x1, y1, z[0]], [x1, y1, z[1]], [x0, y0, z[1]]]
+        F += [[k, k + 1, k + 2], [k, k + 2, k + 3]]
+    return np.array(V, float), np.array(F, int)
+
+
+def test_free_space_ends_where_no_camera_saw_across():
+    """A room whose east wall has a 1.5 m hole (a plain whiteboard the map never measured),
+    its Poisson surface bulging out through it: the cut shows free space outside the room,
+    which the cameras' lines of sight to the points they observed do not cross; with them
+    the free space is the room's."""
+    parts = [
+        _walls([(3, 0.75), (3, 2), (-3, 2), (-3, -2), (3, -2), (3, -0.75)]),  # the room
+        _walls([(3, 0.75), (5, 1.5), (5, -1.5), (3, -0.75)]),  # the bulge beyond the hole
+    ]
+    V = np.concatenate([parts[0][0], parts[1][0]])
+    F = np.concatenate([parts[0][1], parts[1][1] + len(parts[0][0])])
+    cams = np.array([[0.0, 0.0], [-1.5, 1.0], [1.0, -1.0]])
+    rng = np.random.default_rng(2)
+    t = rng.uniform(0, 1, 400)  # observed points on the room's measured walls
+    walls = np.r_[np.c_[np.full(100, -3.0), -2 + 4 * t[:100]], np.c_[-3 + 6 * t[100:200],
+                  np.full(100, 2.0)], np.c_[-3 + 6 * t[200:300], np.full(100, -2.0)],
+                  np.c_[np.full(50, 3.0), 0.75 + 1.25 * t[300:350]],
+                  np.c_[np.full(50, 3.0), -2 + 1.25 * t[350:]]]  # fmt: skip
+    rays = np.stack([np.repeat(cams, len(walls), 0), np.tile(walls, (len(cams), 1))], 1)
+    old = compute_freespace(V, F, cams, 0.15, [0.0], 0.05, "round_001")
+    new = compute_freespace(V, F, cams, 0.15, [0.0], 0.05, "round_001", rays=rays)
+    outside = np.array([[3.8, 0.0], [4.5, 0.5], [4.5, -0.8]])
+    assert old.contains(outside).all()  # the cut alone leaks out of the room
+    assert not new.contains(outside).any()
+    assert new.contains(cams).all()
+    room = (6 - 0.3) * (4 - 0.3)
+    assert 0.85 * room < new.area_m2 <= room + 0.1 and old.area_m2 > room + 3.0

@@ -47,6 +47,14 @@ class MeshConfig(BaseModel):
     robot_radius_m: float = Field(
         0.15, gt=0.0, description="Robot footprint radius (m): free space keeps this from walls."
     )
+    seen_free_space: bool = Field(
+        True,
+        description="Free space only where the cameras saw across it: the lines of sight from "
+        "each camera to the points it observed, seen from above, cover it, and the robot keeps "
+        "its radius from space they do not (where a plain wall left a hole in the map, its "
+        "Poisson surface bulges out of the room and the cut alone leaks through; "
+        "score.freespace.ray_coverage).",
+    )
     cut_heights_m: list[float] = Field(
         default_factory=lambda: [0.0],
         min_length=1,

@@ -266,6 +266,46 @@ def line_of_sight(
     return out.astype(bool)
 
 
+def observation_rays(sfm_dir: str | Path, min_track_length: int = 2) -> np.ndarray:
+    """The map's lines of sight seen from above: for every observation of a 3D point (track
+    of at least ``min_track_length``) the segment from the observing camera's centre to the
+    point, in the x-y plane.
+
+    Returns:
+        (M, 2, 2) segments (m): [camera xy, point xy].
+    """
+    import pycolmap
+
+    rec = pycolmap.Reconstruction(str(sfm_dir))
+    centres = {i: rec.image(i).projection_center()[:2] for i in rec.reg_image_ids()}
+    segs = []
+    for pt in rec.points3D.values():
+        ids = [el.image_id for el in pt.track.elements if el.image_id in centres]
+        if len(ids) < min_track_length:
+            continue
+        p = np.asarray(pt.xyz[:2], np.float64)
+        segs.extend((centres[i], p) for i in ids)
+    return np.asarray(segs, np.float64).reshape(-1, 2, 2)
+
+
+def ray_coverage(
+    rays: np.ndarray, shape: tuple[int, int], origin: np.ndarray, resolution: float
+) -> np.ndarray:
+    """(ny, nx) bool: the raster cells that some segment of ``rays`` (M, 2, 2) (m) crosses,
+    closed over one cell (the gaps between neighbouring rays) and opened over one cell (a
+    lone ray, an outlier's, crosses no region)."""
+    import cv2
+
+    seen = np.zeros(shape, np.uint8)
+    if len(rays):
+        ij = np.round((rays - origin) / resolution - 0.5).astype(np.int32)  # cell-centre units
+        for a, b in ij:
+            cv2.line(seen, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, 1)
+    k = np.ones((3, 3), np.uint8)
+    seen = cv2.morphologyEx(seen, cv2.MORPH_CLOSE, k)
+    return cv2.morphologyEx(seen, cv2.MORPH_OPEN, k).astype(bool)
+
+
 def compute_freespace(
     verts: np.ndarray,
     faces: np.ndarray,
@@ -274,6 +314,7 @@ def compute_freespace(
     cut_heights: list[float],
     resolution: float,
     where: str,
+    rays: np.ndarray | None = None,
 ) -> FreeSpace:
     """Free space of a mesh around the cameras.
 
@@ -285,6 +326,10 @@ def compute_freespace(
         cut_heights: heights of the cutting planes (m).
         resolution: raster cell size (m).
         where: round name for error messages.
+        rays: (M, 2, 2) lines of sight seen from above (:func:`observation_rays`): when given,
+            free space is also only where some camera saw across to a point it observed
+            (:func:`ray_coverage`): where the mesh has a hole (a plain whiteboard) its
+            Poisson surface bulges out of the room, and the cut would show free space there.
 
     Returns:
         The free space.
@@ -319,6 +364,9 @@ def compute_freespace(
     # only space the cameras have looked across: where the map has holes (walls never
     # photographed) the region would otherwise flow around the outside of the mapped walls
     free &= line_of_sight(wall, cam_xy.reshape(-1, 2), origin, resolution)
+    if rays is not None:  # and keep the robot's radius from space no camera saw across
+        seen = ray_coverage(rays, shape, origin, resolution)
+        free &= ndimage.distance_transform_edt(seen) * resolution > robot_radius
     labels, _ = ndimage.label(free)
     cams = np.floor((cam_xy.reshape(-1, 2) - origin) / resolution).astype(int)
     keep = set()

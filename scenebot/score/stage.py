@@ -18,7 +18,12 @@ import numpy as np
 
 from scenebot.score.candidates import read_candidates, sample_candidates, write_candidates
 from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
-from scenebot.score.freespace import FreeSpace, FreeSpaceError, compute_freespace
+from scenebot.score.freespace import (
+    FreeSpace,
+    FreeSpaceError,
+    compute_freespace,
+    observation_rays,
+)
 from scenebot.score.geometry import read_sparse_map
 from scenebot.score.goals import goals_document, select_goals, write_goals
 from scenebot.score.mesh import MeshError, build_mesh, check_mesh, decimate, read_mesh, write_mesh
@@ -65,9 +70,11 @@ def run_mesh(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs) -> dict:
     V, F = build_mesh(smap.xyz, smap.view_dir, smap.track_len, cfg, where, smap.centres)
     write_mesh(outputs.mesh_ply, V, F)
     cam_xy = smap.centres[:, :2]
+    rays = observation_rays(inputs.sfm_dir, cfg.min_track_length) if cfg.seen_free_space else None
     fs = compute_freespace(
-        V, F, cam_xy, cfg.robot_radius_m, cfg.cut_heights_m, cfg.grid_resolution_m, where
-    )
+        V, F, cam_xy, cfg.robot_radius_m, cfg.cut_heights_m, cfg.grid_resolution_m, where,
+        rays=rays,
+    )  # fmt: skip
     fs.save(outputs.freespace_json, outputs.freespace_npz, where)
     if outputs.freespace_png is not None:
         from scenebot.score.plots import plot_freespace
