@@ -346,19 +346,22 @@ def test_no_ceiling_without_its_points_or_with_depth_above_it():
         assert find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, 100, 0.1, 3, 2) is None
 
 
-def test_a_ceiling_of_70_points_is_found_with_the_default_setting():
-    """One office campaign measured about 100 voxel points on its ceiling, another 429; 70
-    are enough by default (``plane_fill.ceiling_min_points``), 40 are not, and the desk
-    below with the walls measured above it is never the ceiling."""
+def test_a_ceiling_of_50_points_is_found_and_a_smear_of_as_many_is_not():
+    """Office campaigns measured about 429, 100 and 55 voxel points on their ceilings; 50
+    are found by default (``plane_fill.ceiling_min_points`` and the peak test), 15 are not,
+    and 300 stray points smeared over 30 cm of height (as many in any 3 cm as a ceiling of
+    30, but no surface) are not either; the desk below with the walls measured above it is
+    never the ceiling."""
     from scenebot.dense.planefill import find_ceiling
 
-    n_min = PlaneFillConfig().ceiling_min_points
+    cfg = PlaneFillConfig()
     cams = np.zeros((5, 3))
-    for n_ceiling, found in ((70, True), (40, False)):
-        pts, nrm = _ceiling_cloud(np.random.default_rng(7), n_ceiling=n_ceiling, sigma=0.005)
+    for n_ceiling, sigma, found in ((50, 0.005, True), (15, 0.005, False), (300, 0.1, False)):
+        pts, nrm = _ceiling_cloud(np.random.default_rng(7), n_ceiling=n_ceiling, sigma=sigma)
         planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
-        ceiling = find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, n_min, 0.1, 3, 2)
-        assert (ceiling is not None) is found
+        ceiling = find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, cfg.ceiling_min_points,
+                               0.1, 3, 2)  # fmt: skip
+        assert (ceiling is not None) is found, (n_ceiling, sigma)
         if found:
             assert -ceiling.offset / ceiling.normal[2] == pytest.approx(2.25, abs=0.005)
 

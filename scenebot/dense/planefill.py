@@ -332,6 +332,8 @@ def find_ceiling(
     close_cells: int,
     max_beyond: float = 0.25,
     above_m: float = 0.1,
+    band_m: float = 0.15,
+    peak_ratio: float = 3.0,
 ) -> Plane | None:
     """The room's ceiling, from the few points a level camera measures on it.
 
@@ -341,9 +343,10 @@ def find_ceiling(
     surface. Indoors it is the highest horizontal surface, and nothing lies above it: the
     ceiling is the highest height (along the floor's normal, above every camera) where at
     least ``min_points`` points whose normals are vertical within ``normal_deg`` lie within
-    ``distance_m``, with fewer points measured more than ``above_m`` above it than
-    ``max_beyond`` times those within ``above_m`` of it (grazing rays from metres away put
-    its points a few cm off).
+    ``distance_m``, and ``peak_ratio`` times as many as the same width holds on average
+    within ``band_m`` around it (a surface, not a smear of stray points), with fewer points
+    measured more than ``above_m`` above it than ``max_beyond`` times those within
+    ``above_m`` of it (grazing rays from metres away put its points a few cm off).
 
     Args:
         points, normals: (N, 3) the thinned cloud and its unit normals.
@@ -355,6 +358,7 @@ def find_ceiling(
         cell_m, min_cell_points, close_cells: its extent raster (:func:`plane_extent`).
         max_beyond: share of the points around it that may lie above it (outliers).
         above_m: how far above it a point counts as above.
+        band_m, peak_ratio: the peak test.
 
     Returns:
         The ceiling plane (its normal the floor's), or None when there is no floor, no
@@ -373,12 +377,15 @@ def find_ceiling(
     cand = vertical & (h > top)
     if cand.sum() < min_points:
         return None
-    # the highest height holding min_points vertical-normal points within distance_m
+    # the highest height holding min_points vertical-normal points within distance_m, a
+    # peak: peak_ratio times as many as the same width holds on average within band_m
     hs = np.sort(h[cand])
     lo_i = np.searchsorted(hs, hs - distance_m, "left")
     hi_i = np.searchsorted(hs, hs + distance_m, "right")
     count = hi_i - lo_i
-    dense = np.flatnonzero(count >= min_points)
+    around = np.searchsorted(hs, hs + band_m, "right") - np.searchsorted(hs, hs - band_m, "left")
+    background = (around - count) * distance_m / max(band_m - distance_m, 1e-9)
+    dense = np.flatnonzero((count >= min_points) & (count >= peak_ratio * background))
     if not len(dense):
         return None
     k = dense[-1]
