@@ -181,7 +181,7 @@ def plot_planes(planes_npz: str | Path | None, out: str | Path) -> None:
         level = abs(pl.normal[2]) > 0.9
         label = f"{pl.area_m2:.1f} m^2, {pl.inliers} points"
         if is_ceiling:
-            ax.scatter(X[:, 0], X[:, 1], s=4, marker="s", facecolors="none", linewidths=0.4,
+            ax.scatter(X[:, 0], X[:, 1], s=1.5, marker="s", facecolors="none", linewidths=0.4,
                        edgecolors="tab:blue", label=f"ceiling ({label})")  # fmt: skip
         elif level:
             kind = "floor" if pl.boundary else "level face"
@@ -199,6 +199,5 @@ def plot_planes(planes_npz: str | Path | None, out: str | Path) -> None:
     ax.set_ylabel("y [m] (map)")
     ax.set_title("plane fill: the planes' extents seen from above")
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), markerscale=3)
-    fig.tight_layout()
-    fig.savefig(str(out), dpi=90)
+    fig.savefig(str(out), dpi=90, bbox_inches="tight")
     plt.close(fig)
