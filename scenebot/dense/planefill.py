@@ -121,6 +121,11 @@ class Plane:
         out[ok] = occ[ij[ok, 0], ij[ok, 1]]
         return out
 
+    def cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """The extent's cells: their (K, 2) raster indices and (K, 3) centres (m)."""
+        ij = np.argwhere(self.occupied)
+        return ij, self.origin + (self.lo + (ij + 0.5) * self.cell_m) @ self.basis
+
     @property
     def area_m2(self) -> float:
         return float(self.occupied.sum()) * self.cell_m**2
@@ -413,13 +418,11 @@ def span_floor(ceiling: Plane, floor: Plane) -> None:
     room spans its floor, though the camera saw only patches of it."""
     from scipy.ndimage import binary_closing
 
-    cells = np.argwhere(floor.occupied)
-    if not len(cells):
+    _, X = floor.cell_centres()
+    if not len(X):
         return
-    X = floor.origin + (floor.lo + (cells + 0.5) * floor.cell_m) @ floor.basis
     X = X - np.outer(X @ ceiling.normal + ceiling.offset, ceiling.normal)  # onto the ceiling
-    own = np.argwhere(ceiling.occupied)
-    Y = ceiling.origin + (ceiling.lo + (own + 0.5) * ceiling.cell_m) @ ceiling.basis
+    _, Y = ceiling.cell_centres()
     p2 = ceiling.to_2d(np.concatenate([X, Y]))
     lo = np.minimum(p2.min(0) - ceiling.cell_m, ceiling.lo)
     ij = np.floor((p2 - lo) / ceiling.cell_m).astype(np.int64)
@@ -445,10 +448,9 @@ def span_to_ceiling(wall: Plane, ceiling: Plane, max_rise_m: float = 1.2) -> int
     if abs(float(wall.normal @ up)) > np.sin(np.radians(10.0)):
         return 0  # not a wall
     h_ceiling = -ceiling.offset
-    cells = np.argwhere(wall.occupied)
+    cells, X = wall.cell_centres()
     if not len(cells):
         return 0
-    X = wall.origin + (wall.lo + (cells + 0.5) * wall.cell_m) @ wall.basis
     h = X @ up
     rise = up - (up @ wall.normal) * wall.normal
     rise /= np.linalg.norm(rise)
@@ -495,10 +497,7 @@ def span_walls(ceiling: Plane, walls: list[Plane], bridge_m: float = 0.6) -> int
     for w in walls:
         if abs(float(w.normal @ up)) > np.sin(np.radians(10.0)):
             continue
-        cells = np.argwhere(w.occupied)
-        if not len(cells):
-            continue
-        X = w.origin + (w.lo + (cells + 0.5) * w.cell_m) @ w.basis
+        _, X = w.cell_centres()
         near = X @ up + ceiling.offset > -2 * w.cell_m  # the wall's cells at the ceiling
         tops.append(X[near])
     if not tops or not sum(len(t) for t in tops):
@@ -720,8 +719,7 @@ def shadow_planes(
             gap = abs(pj.origin @ pi.normal + pi.offset)
             if gap > max_gap_m:
                 continue
-            cells = np.argwhere(pj.occupied)
-            X = pj.origin + (pj.lo + (cells + 0.5) * pj.cell_m) @ pj.basis
+            _, X = pj.cell_centres()
             overlap = float(pi.inside(X).mean()) if len(X) else 0.0
             if overlap >= min_overlap:
                 why[j] = (f"shadow of a plane {100 * gap:.1f} cm away ({100 * overlap:.0f}% "
@@ -1137,38 +1135,6 @@ def sparse_observations(sparse_dir: Path) -> dict[str, tuple[np.ndarray, np.ndar
     return out
 
 
-def _contradicted_triangles(
-    depth: np.ndarray,
-    filled: np.ndarray,
-    uv: np.ndarray,
-    z: np.ndarray,
-    rel: float,
-    margin_m: float,
-    max_edge_px: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The contradicted observations (N,) bool and the Delaunay triangles (T, 3) of the
-    view's observations whose corners are all contradicted, no edge over ``max_edge_px``."""
-    from scipy.spatial import Delaunay, QhullError
-
-    h, w = depth.shape
-    u = np.clip(uv[:, 0].astype(np.int64), 0, w - 1)
-    v = np.clip(uv[:, 1].astype(np.int64), 0, h - 1)
-    d = depth[v, u]
-    bad = filled[v, u] & (d > 0) & (np.abs(z - d) > rel * d + margin_m)
-    tri = np.zeros((0, 3), np.int64)
-    if bad.sum() >= 3:
-        try:
-            tri = Delaunay(uv).simplices
-        except QhullError:  # degenerate (collinear) points
-            tri = np.zeros((0, 3), np.int64)
-        tri = tri[bad[tri].all(1)]
-        if len(tri):
-            corners = uv[tri]
-            edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(1)
-            tri = tri[edge <= max_edge_px]
-    return bad, tri
-
-
 def sparse_contradicted_fill(
     depth: np.ndarray,
     filled: np.ndarray,
@@ -1201,15 +1167,27 @@ def sparse_contradicted_fill(
         (H, W) bool: the filled pixels to empty again.
     """
     import cv2
+    from scipy.spatial import Delaunay, QhullError
 
-    out = np.zeros(depth.shape, np.uint8)
+    h, w = depth.shape
+    out = np.zeros((h, w), np.uint8)
     if not filled.any() or len(z) == 0:
         return out.astype(bool)
-    bad, tri = _contradicted_triangles(depth, filled, uv, z, rel, margin_m, max_edge_px)
+    u = np.clip(uv[:, 0].astype(np.int64), 0, w - 1)
+    v = np.clip(uv[:, 1].astype(np.int64), 0, h - 1)
+    d = depth[v, u]
+    bad = filled[v, u] & (d > 0) & (np.abs(z - d) > rel * d + margin_m)
     for k in np.flatnonzero(bad):  # the point's own neighbourhood
         cv2.circle(out, (int(uv[k, 0]), int(uv[k, 1])), 3, 1, -1)
-    for c in uv[tri]:
-        cv2.fillConvexPoly(out, np.round(c - 0.5).astype(np.int32), 1)
+    if bad.sum() >= 3:
+        try:
+            tri = Delaunay(uv).simplices
+        except QhullError:  # degenerate (collinear) points
+            tri = np.zeros((0, 3), np.int64)
+        corners = uv[tri[bad[tri].all(1)]]
+        edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(1, initial=0.0)
+        for c in corners[edge <= max_edge_px]:
+            cv2.fillConvexPoly(out, np.round(c - 0.5).astype(np.int32), 1)
     return out.astype(bool) & filled
 
 

@@ -174,10 +174,9 @@ def plot_planes(planes_npz: str | Path | None, out: str | Path) -> None:
     colours = plt.get_cmap("tab10")
     k_wall = 0
     for pl, is_ceiling in planes:
-        cells = np.argwhere(pl.occupied)
-        if not len(cells):
+        _, X = pl.cell_centres()
+        if not len(X):
             continue
-        X = pl.origin + (pl.lo + (cells + 0.5) * pl.cell_m) @ pl.basis
         level = abs(pl.normal[2]) > 0.9
         label = f"{pl.area_m2:.1f} m^2, {pl.inliers} points"
         if is_ceiling:
