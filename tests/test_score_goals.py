@@ -104,7 +104,10 @@ def scored_room(tmp_path_factory):
         so,
     )
     go = GoalsOutputs(root / "goals.json", root / "goals.png")
-    doc = run_goals(GoalsConfig(k=6), GoalsInputs(so.candidates_csv, mo.freespace_npz), go)
+    # the paper's heuristic with the area overlap test only (the matchable-points rule is
+    # tested on its own below)
+    cfg = GoalsConfig(k=6, min_matchable_points=0)
+    doc = run_goals(cfg, GoalsInputs(so.candidates_csv, mo.freespace_npz), go)
     return {"root": root, "mo": mo, "so": so, "go": go, "doc": doc, "summary": summary}
 
 
@@ -146,7 +149,7 @@ def test_candidates_file(scored_room):
 def test_zero_candidates_file_is_named(scored_room, tmp_path):
     p = tmp_path / "round_007" / "candidates.csv"
     p.parent.mkdir()
-    p.write_text("x,y,theta,score_deg,hit_fraction,seen_fraction\n")
+    p.write_text("x,y,theta,score_deg,hit_fraction,seen_fraction,matchable_points\n")
     with pytest.raises(ValueError, match=r"round_007.*n_candidates"):
         run_goals(
             GoalsConfig(),
@@ -163,7 +166,7 @@ def test_goals_keep_enough_photographed_surface_to_register(scored_room, tmp_pat
     for m in (0.0, 0.4):
         go = GoalsOutputs(tmp_path / f"goals_{m}.json")
         doc = run_goals(
-            GoalsConfig(k=6, min_seen_fraction=m),
+            GoalsConfig(k=6, min_seen_fraction=m, min_matchable_points=0),
             GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz),
             go,
         )
@@ -173,6 +176,29 @@ def test_goals_keep_enough_photographed_surface_to_register(scored_room, tmp_pat
         assert doc["best_score_any_deg"] >= doc["best_score_deg"]
     assert np.all(seen[0.4] >= 0.4)
     assert seen[0.0].min() < 0.4  # the paper's goals include views that show almost nothing known
+
+
+def test_goals_see_enough_map_points_to_register(scored_room, tmp_path):
+    """goals.min_matchable_points: every goal's view holds that many map points seen as the
+    map saw them; in this room the unphotographed east walls have no map points, so views
+    facing them straight are not goals, and without the rule some goals are such views."""
+    cols = read_candidates(scored_room["so"].candidates_csv)
+    m = cols["matchable_points"]
+    assert np.all(m >= 0) and np.all(m == np.round(m))
+    east = np.cos(cols["theta"]) > 0.9
+    west = np.cos(cols["theta"]) < -0.9
+    assert np.median(m[west]) > 5 * max(np.median(m[east]), 1)
+    chosen = {}
+    for n in (0, 100):
+        doc = run_goals(
+            GoalsConfig(k=6, min_matchable_points=n),
+            GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz),
+            GoalsOutputs(tmp_path / f"goals_{n}.json"),
+        )
+        assert doc["min_matchable_points"] == n
+        chosen[n] = m[[g["candidate"] for g in doc["goals"]]]
+    assert len(chosen[100]) >= 1 and chosen[100].min() >= 100
+    assert chosen[0].min() < 100
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,15 @@ import numpy as np
 
 from scenebot.score.freespace import FreeSpace, FreeSpaceError
 
-CSV_COLUMNS = ("x", "y", "theta", "score_deg", "hit_fraction", "seen_fraction")
+CSV_COLUMNS = (
+    "x",
+    "y",
+    "theta",
+    "score_deg",
+    "hit_fraction",
+    "seen_fraction",
+    "matchable_points",
+)
 """Columns of candidates.csv: x, y (m), theta (rad), score (deg), fractions (0..1)."""
 
 
@@ -61,7 +69,8 @@ def write_candidates(path: str | Path, poses: np.ndarray, cols: dict[str, np.nda
     Args:
         path: output path.
         poses: (N, 3) x, y (m), theta (rad).
-        cols: ``score_deg``, ``hit_fraction``, ``seen_fraction`` arrays (N,).
+        cols: ``score_deg``, ``hit_fraction``, ``seen_fraction``, ``matchable_points``
+            arrays (N,).
     """
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     data = np.column_stack([poses] + [np.asarray(cols[c], np.float64) for c in CSV_COLUMNS[3:]])

@@ -100,6 +100,20 @@ class ScoreConfig(BaseModel):
         "auto",
         description="Taichi backend: auto = CUDA/Vulkan if present else CPU; gpu = fail if none.",
     )
+    match_angle_deg: float = Field(
+        45.0,
+        gt=0.0,
+        le=180.0,
+        description="A candidate can match a map point it sees within this angle of the mean "
+        "direction the map's cameras saw it from (degrees; SIFT's viewpoint range). Counted "
+        "per candidate as `matchable_points` (score.matchable).",
+    )
+    match_scale_ratio: float = Field(
+        2.0,
+        ge=1.0,
+        description="...and from a distance within this factor, either way, of the map "
+        "cameras' mean distance to it (SIFT's scale range).",
+    )
     plot_top: int = Field(4, ge=0, description="Top candidates drawn as per-pixel score images.")
 
 
@@ -181,6 +195,15 @@ class GoalsConfig(BaseModel):
         description="Candidates whose view shows less of the map's already photographed "
         "surface than this share of its pixels are not goals: a photo there could not be "
         "registered to the map (too little overlap). 0: the paper's choice, overlap ignored.",
+    )
+    min_matchable_points: int = Field(
+        100,
+        ge=0,
+        description="Candidates predicted to match fewer of the map's 3D points than this "
+        "(candidates.csv `matchable_points`: in view, seen within score.match_angle_deg and "
+        "score.match_scale_ratio of how the map saw them) are not goals: their photos would "
+        "not register. An area of photographed surface is not enough: a plain wall at a "
+        "grazing angle has no features. 0: off.",
     )
     min_hit_fraction: float = Field(
         0.2,

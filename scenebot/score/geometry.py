@@ -132,6 +132,7 @@ class SparseMap:
         xyz: (P, 3) 3D point positions (m).
         track_len: (P,) number of images observing each point.
         view_dir: (P, 3) unit mean direction from each point towards the cameras observing it.
+        view_dist: (P,) mean distance from each point to the cameras observing it (m).
         R: (S, 3, 3) cam_from_world rotations of the registered images.
         t: (S, 3) cam_from_world translations (m).
         intrinsics: (S,) pinhole approximation of each image's camera.
@@ -141,6 +142,7 @@ class SparseMap:
     xyz: np.ndarray
     track_len: np.ndarray
     view_dir: np.ndarray
+    view_dist: np.ndarray
     R: np.ndarray
     t: np.ndarray
     intrinsics: list[Intrinsics]
@@ -197,22 +199,25 @@ def read_sparse_map(sfm_dir: str | Path) -> SparseMap:
         intrs.append(_pinhole(rec.cameras[im.camera_id]))
         names.append(im.name)
         centres[image_id] = -R.T @ t
-    xyz, tl, vd = [], [], []
+    xyz, tl, vd, vdist = [], [], [], []
     for _pid, pt in rec.points3D.items():
         p = np.asarray(pt.xyz, dtype=np.float64)
         ids = [el.image_id for el in pt.track.elements if el.image_id in centres]
         if not ids:
             continue
         d = np.array([centres[i] - p for i in ids])
-        d /= np.linalg.norm(d, axis=1, keepdims=True) + 1e-12
+        dn = np.linalg.norm(d, axis=1, keepdims=True)
+        d /= dn + 1e-12
         m = d.mean(axis=0)
         xyz.append(p)
         tl.append(len(ids))
         vd.append(m / (np.linalg.norm(m) + 1e-12))
+        vdist.append(float(dn.mean()))
     return SparseMap(
         xyz=np.array(xyz, dtype=np.float64).reshape(-1, 3),
         track_len=np.array(tl, dtype=np.int64),
         view_dir=np.array(vd, dtype=np.float64).reshape(-1, 3),
+        view_dist=np.array(vdist, dtype=np.float64),
         R=np.array(Rs, dtype=np.float64).reshape(-1, 3, 3),
         t=np.array(ts, dtype=np.float64).reshape(-1, 3),
         intrinsics=intrs,

@@ -24,8 +24,9 @@ from scenebot.score.freespace import (
     compute_freespace,
     observation_rays,
 )
-from scenebot.score.geometry import read_sparse_map
+from scenebot.score.geometry import candidate_views, read_sparse_map
 from scenebot.score.goals import goals_document, select_goals, write_goals
+from scenebot.score.matchable import matchable_points
 from scenebot.score.mesh import MeshError, build_mesh, check_mesh, decimate, read_mesh, write_mesh
 
 log = logging.getLogger(__name__)
@@ -144,6 +145,17 @@ def run_score(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> d
     t0 = time.perf_counter()
     res = scorer.score(poses)
     dt = time.perf_counter() - t0
+    matchable = matchable_points(
+        candidate_views(poses, scorer.intr),
+        scorer.intr.width,
+        scorer.intr.height,
+        smap.xyz,
+        smap.view_dir,
+        smap.view_dist,
+        cfg.match_angle_deg,
+        cfg.match_scale_ratio,
+        cfg.near_m,
+    )
     write_candidates(
         outputs.candidates_csv,
         poses,
@@ -151,6 +163,7 @@ def run_score(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> d
             "score_deg": res.score_deg,
             "hit_fraction": res.hit_fraction,
             "seen_fraction": res.seen_fraction,
+            "matchable_points": matchable,
         },
     )
     if outputs.views_png is not None and cfg.plot_top > 0:
@@ -160,8 +173,6 @@ def run_score(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> d
         s = np.where(np.isfinite(res.score_deg), res.score_deg, -np.inf)
         top = np.argsort(-s)[: min(cfg.plot_top, scorer.batch)]
         top_res = scorer.score(poses[top], return_pixels=True)
-        from scenebot.score.geometry import candidate_views
-
         depth = scorer.render_depth(candidate_views(poses[top], scorer.intr))
         plot_top_views(
             outputs.views_png,
@@ -217,13 +228,16 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
     fs = FreeSpace.load(inputs.freespace_npz)
     valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & fs.contains(poses[:, :2])
     any_valid = valid.copy()
-    registrable = cols["seen_fraction"] >= cfg.min_seen_fraction
+    registrable = (cols["seen_fraction"] >= cfg.min_seen_fraction) & (
+        cols["matchable_points"] >= cfg.min_matchable_points
+    )
     if cfg.method == "score" and (valid & registrable).any():
         valid &= registrable
     elif cfg.method == "score" and valid.any():
         log.warning(
-            "%s: no candidate shows goals.min_seen_fraction = %.2f of photographed surface; "
-            "goals ignore the overlap this round", where, cfg.min_seen_fraction,
+            "%s: no candidate shows goals.min_seen_fraction = %.2f of photographed surface "
+            "and goals.min_matchable_points = %d map points; goals ignore the overlap this "
+            "round", where, cfg.min_seen_fraction, cfg.min_matchable_points,
         )  # fmt: skip
     score = np.where(valid, cols["score_deg"], np.nan)
     if cfg.method == "frontier":
@@ -251,6 +265,7 @@ def run_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> d
         extra={
             "n_valid": int(valid.sum()),
             "min_seen_fraction": cfg.min_seen_fraction,
+            "min_matchable_points": cfg.min_matchable_points,
             # the best score over every candidate, registrable or not (for information:
             # "complete" and the goals only consider views a photo could be registered from)
             "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
