@@ -47,9 +47,13 @@ class EvaluateConfig(BaseModel):
         [0.01, 0.02, 0.05], description="Distances (m) of accuracy and completeness."
     )
     max_cloud_points: int = Field(
-        2_000_000,
+        20_000_000,
         ge=1000,
-        description="A denser fused cloud is randomly subsampled (seeded) to this many points.",
+        description="A denser fused cloud is randomly subsampled (seeded) to this many points "
+        "(a memory guard). Subsampling thins the sparse parts of a cloud (ceiling, far walls) "
+        "below the distance thresholds and so understates completeness: the office campaign "
+        "of 2026-11-26, a 3.9-million-point cloud, measures 82.7% at 2 cm subsampled to 2 "
+        "million and 87.2% whole (accuracy 97.4% either way).",
     )
     seed: int = Field(
         0, description="Seed of the surface sampling, cloud subsampling and validity draws."
