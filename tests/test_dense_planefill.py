@@ -582,3 +582,33 @@ def test_the_ceiling_reaches_the_walls_it_meets():
     for y in (0.65, 2.05, 3.35):  # (an open end of the strip is left to the next wall)
         assert on(1.0, y) and on(2.75, y) and on(2.95, y)  # the strip along the wall
         assert not on(3.35, y)  # not past the wall
+
+
+@pytest.mark.parametrize("nz", [-1.0, 1.0])
+def test_the_floor_reaches_the_walls_that_stand_on_it(nz):
+    """The floor's extent ends 0.5 m short of a wall (its corner seen only at grazing
+    angles); where the wall's cells reach the floor the floor widens to it, where the wall's
+    lowest cells are 1 m up (something stood in front of it) it does not. Either sign of the
+    floor's normal: the side away from the cameras decides."""
+    from scenebot.dense.planefill import Plane, span_walls
+
+    cell = 0.1
+    occ = np.zeros((40, 40), bool)
+    occ[:35] = True  # x 0..3.5 m (rows), y 0..4 m (columns)
+    floor = Plane(np.array([0, 0, nz]), 0.0, np.eye(3)[:2], np.zeros(3), cell,
+                  np.array([0.0, 0.0]), occ, 5000, boundary=True)  # fmt: skip
+    wocc = np.ones((40, 26), bool)  # the wall at x = 4: rows along y, columns z 2.5 .. 0 m
+    wocc[20:, 16:] = False  # y 2..4 m: nothing measured below z = 1 m
+    wall = Plane(np.array([1.0, 0, 0]), -4.0, np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]),
+                 np.array([4.0, 0, 0]), cell, np.array([0.0, -2.55]), wocc, 1000,
+                 boundary=True)  # fmt: skip
+    cams = np.array([[1.0, 1.0, 0.35], [2.0, 3.0, 0.35]])
+    assert span_walls(floor, [wall], centres=cams) > 0
+
+    def on(x, y):
+        return bool(floor.inside(np.array([[x, y, 0.0]]))[0])
+
+    for y in (0.35, 1.05, 1.65):
+        assert on(3.75, y) and on(3.95, y) and not on(4.35, y)
+    for y in (2.55, 3.45):
+        assert on(3.45, y) and not on(3.75, y)

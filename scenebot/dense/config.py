@@ -204,6 +204,13 @@ class PlaneFillConfig(BaseModel):
         "Delaunay triangles of the view's observations whose three corners lie off the fill "
         "by > 5% (planefill.sparse_contradicted_fill).",
     )
+    floor_to_walls: bool = Field(
+        True,
+        description="The floor's extent reaches the bottom edges of the room's walls (boundary "
+        "planes), gaps up to 0.6 m closed: a corner of the floor is seen only at grazing "
+        "angles from across the room, and the floor's carved hull cut it off "
+        "(planefill.span_walls).",
+    )
     walls_to_ceiling_m: float = Field(
         1.2,
         ge=0,

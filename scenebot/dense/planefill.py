@@ -481,11 +481,22 @@ def span_to_ceiling(wall: Plane, ceiling: Plane, max_rise_m: float = 1.2) -> int
     return int(occ.sum()) - before
 
 
-def span_walls(ceiling: Plane, walls: list[Plane], bridge_m: float = 0.6) -> int:
-    """Widen a ceiling's extent (in place) to the top edges of the room's walls: their cells
-    projected onto it, and the gaps between them and the ceiling's cells up to
-    ``bridge_m`` closed. The floor along a wall is often under furniture, so the ceiling
-    spanned from the floor (:func:`span_floor`) stops short of the wall it meets.
+def span_walls(
+    ceiling: Plane, walls: list[Plane], bridge_m: float = 0.6, centres: np.ndarray | None = None
+) -> int:
+    """Widen a ceiling's or a floor's extent (in place) to the edges of the room's walls
+    where they meet it: the walls' cells within two cells of it (or past it) projected onto
+    it, and the gaps between them and its own cells up to ``bridge_m`` closed. The floor
+    along a wall is often under furniture, so the ceiling spanned from the floor
+    (:func:`span_floor`) stops short of the wall it meets; the floor in a corner is seen only
+    at grazing angles from across the room, so its carved hull cuts the corner off.
+
+    Args:
+        ceiling: the ceiling or the floor (its extent widened).
+        walls: the room's walls (planes within 10 degrees of vertical to it are used).
+        bridge_m: largest gap closed (m).
+        centres: (C, 3) camera centres: "past it" is away from them; None: along the
+            plane's normal (the ceiling's, which points up, away from the cameras).
 
     Returns:
         The number of cells added.
@@ -493,12 +504,15 @@ def span_walls(ceiling: Plane, walls: list[Plane], bridge_m: float = 0.6) -> int
     from scipy.ndimage import binary_closing
 
     up = ceiling.normal / np.linalg.norm(ceiling.normal)
+    if centres is not None and len(centres):
+        up = up * -np.sign(np.median(centres @ ceiling.normal + ceiling.offset) or -1.0)
+    side = float(np.sign(up @ ceiling.normal))
     tops = []
     for w in walls:
         if abs(float(w.normal @ up)) > np.sin(np.radians(10.0)):
             continue
         _, X = w.cell_centres()
-        near = X @ up + ceiling.offset > -2 * w.cell_m  # the wall's cells at the ceiling
+        near = side * (X @ ceiling.normal + ceiling.offset) > -2 * w.cell_m  # cells at it
         tops.append(X[near])
     if not tops or not sum(len(t) for t in tops):
         return 0
@@ -1298,6 +1312,17 @@ def plane_fill(
                                                 cfg.label_rel_distance, cfg.carve_min_rays),
                            strict=True):  # fmt: skip
             pl.occupied = ext
+        if cfg.floor_to_walls:
+            centres = np.array([-R.T @ t for _, _, R, t, _ in views])
+            up = np.array([0.0, 0.0, 1.0])  # the map's z axis (sfm: robot frame, z up)
+            level = [p for p in planes if p is not ceiling and p.boundary
+                     and abs(p.normal @ up) > np.cos(np.radians(10.0))]  # fmt: skip
+            walls = [p for p in planes if p is not ceiling and p.boundary
+                     and abs(p.normal @ up) < np.sin(np.radians(10.0))]  # fmt: skip
+            if level and walls:  # the floor: the largest level boundary plane below the cameras
+                floor = max(level, key=lambda p: p.inliers)
+                if np.median(centres @ floor.normal + floor.offset) * (floor.normal @ up) > 0:
+                    span_walls(floor, walls, centres=centres)
         if ceiling is not None and any(p is ceiling for p in planes) and ceiling.boundary:
             level = [p for p in planes if p is not ceiling and p.boundary
                      and abs(p.normal @ ceiling.normal) > 0.999]  # fmt: skip
