@@ -349,12 +349,14 @@ class Config(_Model):
     )
     seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
     max_rounds: int = Field(
-        5,
+        7,
         ge=1,
         description="Capture rounds at most: round 0 (exploration) and max_rounds - 1 "
         "adaptive rounds; the campaign stops earlier when a round's goals.json says complete "
-        "(goals.complete_threshold_deg, goals.min_score_gain). A safety cap: 100 round-0 "
-        "photos and 25 a round stay within 200.",
+        "(goals.complete_threshold_deg, goals.min_score_gain). 100 round-0 photos and 25 a "
+        "round stay within 250 (the photo budget of issue 9 is 260). The office campaign of "
+        "2026-11-26 measured 83.3% dense completeness at 2 cm after 5 rounds (200 photos) "
+        "and 87.2% after 7 (245).",
     )
     world: WorldConfig = WorldConfig()
     sim: SimConfig = SimConfig()

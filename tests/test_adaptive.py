@@ -41,7 +41,9 @@ def test_camera_mount_is_configured_once_and_follow_inherits_it():
         {"sim": {"camera": {"forward_offset_m": 0.2}}, "follow": {"camera_forward_m": 0.05}}
     )
     assert own.follow.camera_forward_m == 0.05  # an explicit value is kept
-    assert Config().max_rounds == 5
+    # the default campaign stays within issue 9's budget of 260 photos
+    c = Config()
+    assert c.exploration.photos + (c.max_rounds - 1) * c.goals.k * c.adaptive.fan_photos <= 260
     assert Config(max_rounds=2).round_limit() == 2
     photos = Config.model_validate({"robot": "photos", "photos": {"folder": "x"}, "max_rounds": 3})
     assert photos.round_limit() == 1  # a folder of photos is round 0; no robot takes more
