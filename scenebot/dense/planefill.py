@@ -503,13 +503,13 @@ def span_walls(
     """
     from scipy.ndimage import binary_closing
 
-    up = ceiling.normal / np.linalg.norm(ceiling.normal)
+    normal = ceiling.normal / np.linalg.norm(ceiling.normal)
+    side = 1.0  # +1: "past it" is along the normal
     if centres is not None and len(centres):
-        up = up * -np.sign(np.median(centres @ ceiling.normal + ceiling.offset) or -1.0)
-    side = float(np.sign(up @ ceiling.normal))
+        side = float(-np.sign(np.median(centres @ ceiling.normal + ceiling.offset))) or 1.0
     tops = []
     for w in walls:
-        if abs(float(w.normal @ up)) > np.sin(np.radians(10.0)):
+        if abs(float(w.normal @ normal)) > np.sin(np.radians(10.0)):
             continue
         _, X = w.cell_centres()
         near = side * (X @ ceiling.normal + ceiling.offset) > -2 * w.cell_m  # cells at it
@@ -1247,6 +1247,7 @@ def plane_fill(
         fname = ws.map_path(dense_dir, "depth", name, "geometric").name
         return read_array(kept["depth"] / fname), read_array(kept["normal"] / fname)
 
+    centres = np.array([-R.T @ t for _, _, R, t, _ in views])
     # the planes, from every view's measured depth thinned to a voxel grid
     rng = np.random.default_rng(cfg.seed)
     pts, nrms = [], []
@@ -1273,7 +1274,6 @@ def plane_fill(
     )  # fmt: skip
     ceiling = None
     if cfg.ceiling_min_points and planes:
-        centres = np.array([-R.T @ t for _, _, R, t, _ in views])
         ceiling = find_ceiling(
             cloud, cloud_n, planes, centres, cfg.ransac_distance_m, cfg.normal_deg or 30.0,
             cfg.ceiling_min_points, cfg.extent_cell_m, cfg.extent_min_points,
@@ -1312,24 +1312,20 @@ def plane_fill(
                                                 cfg.label_rel_distance, cfg.carve_min_rays),
                            strict=True):  # fmt: skip
             pl.occupied = ext
+        # the room's boundary planes other than the ceiling (span_walls keeps the upright ones)
+        walls = [p for p in planes if p is not ceiling and p.boundary]
         if cfg.floor_to_walls:
-            centres = np.array([-R.T @ t for _, _, R, t, _ in views])
             up = np.array([0.0, 0.0, 1.0])  # the map's z axis (sfm: robot frame, z up)
-            level = [p for p in planes if p is not ceiling and p.boundary
-                     and abs(p.normal @ up) > np.cos(np.radians(10.0))]  # fmt: skip
-            walls = [p for p in planes if p is not ceiling and p.boundary
-                     and abs(p.normal @ up) < np.sin(np.radians(10.0))]  # fmt: skip
-            if level and walls:  # the floor: the largest level boundary plane below the cameras
+            level = [p for p in walls if abs(p.normal @ up) > np.cos(np.radians(10.0))]
+            if level:  # the floor: the largest level boundary plane below the cameras
                 floor = max(level, key=lambda p: p.inliers)
                 if np.median(centres @ floor.normal + floor.offset) * (floor.normal @ up) > 0:
                     span_walls(floor, walls, centres=centres)
         if ceiling is not None and any(p is ceiling for p in planes) and ceiling.boundary:
-            level = [p for p in planes if p is not ceiling and p.boundary
-                     and abs(p.normal @ ceiling.normal) > 0.999]  # fmt: skip
+            level = [p for p in walls if abs(p.normal @ ceiling.normal) > 0.999]
             if level:  # the floor: the largest boundary plane parallel to the ceiling
                 span_floor(ceiling, max(level, key=lambda p: p.inliers))
             if cfg.walls_to_ceiling_m > 0:
-                walls = [p for p in planes if p is not ceiling and p.boundary]
                 for p in walls:
                     span_to_ceiling(p, ceiling, cfg.walls_to_ceiling_m)
                 span_walls(ceiling, walls)
@@ -1344,8 +1340,7 @@ def plane_fill(
             )
         planes = [p for j, p in enumerate(planes) if j not in shadows]
     LOG.info("dense: %d planes in %d voxel points", len(planes), len(cloud))
-    save_planes(dense_dir / PLANES_NPZ, planes, ceiling,
-                np.array([-R.T @ t for _, _, R, t, _ in views]))  # fmt: skip
+    save_planes(dense_dir / PLANES_NPZ, planes, ceiling, centres)
     observed: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     if cfg.sparse_veto and (dense_dir / "sparse").is_dir():
         observed = sparse_observations(dense_dir / "sparse")

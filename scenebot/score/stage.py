@@ -142,11 +142,12 @@ def run_score(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> d
     fs = FreeSpace.load(inputs.freespace_npz)
     poses = sample_candidates(fs, cfg.n_candidates, np.random.default_rng(cfg.seed), where)
     scorer = make_scorer(cfg, V, F, smap, where)
+    views = candidate_views(poses, scorer.intr)
     t0 = time.perf_counter()
-    res = scorer.score(poses)
+    res = scorer.score_views(views)
     dt = time.perf_counter() - t0
     matchable = matchable_points(
-        candidate_views(poses, scorer.intr),
+        views,
         scorer.intr.width,
         scorer.intr.height,
         smap.xyz,
@@ -172,8 +173,8 @@ def run_score(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> d
 
         s = np.where(np.isfinite(res.score_deg), res.score_deg, -np.inf)
         top = np.argsort(-s)[: min(cfg.plot_top, scorer.batch)]
-        top_res = scorer.score(poses[top], return_pixels=True)
-        depth = scorer.render_depth(candidate_views(poses[top], scorer.intr))
+        top_res = scorer.score_views(views[top], return_pixels=True)
+        depth = scorer.render_depth(views[top])
         plot_top_views(
             outputs.views_png,
             depth,
