@@ -1,7 +1,7 @@
 # scenebot: autonomous scene capture, as a Snakemake workflow.
 # This file is the table of contents; every decision lives in the scenebot package.
 #   snakemake --cores 2                         the default campaign (config.yaml)
-#   snakemake --cores 2 --configfile my.yaml    another campaign
+#   snakemake --cores 2 --configfile=my.yaml    another campaign (targets before --configfile)
 from snakemake.utils import min_version
 
 min_version("9.0")

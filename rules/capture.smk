@@ -23,7 +23,7 @@ rule capture_round0:
         robot=1,
     params:
         py=PY,
-        cfg=stage_params("world", "sim", "exploration", "nxt", "nxt_emulator"),
+        cfg=stage_params("exploration", *CFG.robot_sections()),
         out=lambda w, output: Path(output.log).parent,
     shell:
         "{params.py:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "
@@ -56,11 +56,8 @@ rule capture_adaptive:
     params:
         py=PY,
         cfg=stage_params(
-            "world",
-            "sim",
             "exploration",
-            "nxt",
-            "nxt_emulator",
+            *CFG.robot_sections(),
             "follow",
             "adaptive",
             "localize",

@@ -6,14 +6,24 @@ from types import SimpleNamespace
 
 from snakemake.utils import validate
 
-from scenebot.config import ConfigError, section_json, validate_config
+from scenebot.config import (
+    ConfigError,
+    check_config_files,
+    normalize_config,
+    section_json,
+    validate_config,
+)
+from scenebot.sfm.photofiles import photo_files
 
-# A wrong value stops the workflow here, naming the key and the allowed values
-# (the typed model first, for its messages; then the JSON schema generated from it).
+# A wrong value stops the workflow here, naming the key and what to write (the typed model
+# first, for its messages; then the JSON schema generated from it, which sees the values as
+# the model read them: "12" for a whole number is 12, as nested --config values are text).
 try:
+    check_config_files(workflow.overwrite_configfiles or [])
     CFG = validate_config(config, "the workflow config (config.yaml and --config)")
 except ConfigError as exc:
     raise WorkflowError(str(exc)) from None
+config.update(normalize_config(config, CFG))
 validate(config, schema="../scenebot/config.schema.json", set_default=False)
 
 PY = sys.executable  # there is no bare `python` on PATH outside the virtualenv
@@ -47,7 +57,7 @@ STAGE_CODE = {
     ],
     "plan": ["plan", "score/geometry.py"],
     "dense": ["dense"],
-    "campaign": ["campaign.py", "capturelog.py"],
+    "campaign": ["campaign.py", "capturelog.py", "jpeg.py"],
     "tour": ["tour", "score/freespace.py"],
     "evaluate": [
         "evaluate",
@@ -55,6 +65,7 @@ STAGE_CODE = {
         "sim/obstacles.py",
         "sfm/evaluate.py",
         "capturelog.py",
+        "jpeg.py",
     ],
 }
 
@@ -145,11 +156,8 @@ def previous_goals(wildcards):
 def captures_until(wildcards):
     """The capture logs of rounds 0..r (the map of round r uses all of them)."""
     r = int(wildcards.r)
-    if PHOTOS and r == 0:
-        folder = Path(CFG.photos.folder)
-        return sorted(
-            str(p) for p in folder.glob("*") if p.suffix.lower() in (".jpg", ".jpeg")
-        )
+    if PHOTOS and r == 0:  # the photo files as the sfm stage reads them
+        return [str(p) for p in photo_files(CFG.photos.folder)]
     return [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(r + 1)]
 
 

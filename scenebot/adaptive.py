@@ -6,15 +6,18 @@ planned route) and ``navgrid.npz`` (the grid the follower replans on, marking ob
 bumper finds). Writes ``round_{r}/capture/`` like round 0:
 
 * ``images/r{r}_NNNN.jpg``: the photos taken at the goals (read-only, never deleted);
-* ``nav/``: the localization photos taken on the way (kept, not part of the map);
-* ``session.jsonl`` / ``log.jsonl``: photo records carry ``odometry``, ``localization``
-  (the robot pose estimated from that very photo, map frame), ``localization_inliers`` and
-  ``goal_index``; events ``follow_start``, ``localize``, ``obstacle``, ``replan``,
-  ``follow_end``, ``goal_reached`` / ``goal_abandoned`` / ``goal_skipped`` (with the reason;
-  a backup goal driven to in place of an abandoned one carries ``backup_for``);
-  in the simulator every record carries ``truth`` (evaluation only);
-* ``trajectory.png``: the map-frame picture of the round (grid, planned and driven paths,
-  fixes, photos, obstacles, goals reached and abandoned);
+* ``nav/``: the localization photos taken on the way (kept, not part of the map; a re-take
+  archives them with everything else, see :func:`scenebot.capture.archive_previous`);
+* ``session.jsonl`` / ``log.jsonl`` (a hard link; see :mod:`scenebot.capture`): photo
+  records carry ``odometry``, ``localization`` (the robot pose estimated from that very
+  photo, map frame), ``localization_inliers`` and ``goal_index``; events ``follow_start``,
+  ``localize``, ``obstacle``, ``replan``, ``follow_end``, ``goal_reached`` /
+  ``goal_abandoned`` / ``goal_skipped`` (with the reason; a backup goal driven to in place
+  of an abandoned one carries ``backup_for``); in the simulator every record carries
+  ``truth`` (evaluation only); ``localize`` events name their photo relative to the capture
+  folder (``nav/...``);
+* ``trajectory.png`` (a hard link to ``session.png``): the map-frame picture of the round
+  (grid, planned and driven paths, fixes, photos, obstacles, goals reached and abandoned);
 * ``sim_state.json`` (simulator backends only): the world's true robot pose at the end, so
   the next round's simulated world continues where this one stopped. It is physics state,
   like the room itself; no decision reads it.
@@ -33,7 +36,6 @@ import logging
 import math
 import os
 import re
-import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -43,6 +45,7 @@ from tqdm import tqdm
 
 from scenebot.capturelog import CaptureLog
 from scenebot.config import Config
+from scenebot.explore import write_faults
 from scenebot.robot.base import Pose2D, wrap_angle
 
 log = logging.getLogger("scenebot.adaptive")
@@ -81,7 +84,8 @@ def read_sim_state(capture_dir: Path) -> Pose2D | None:
 
 
 def write_sim_state(capture_dir: Path, world) -> None:
-    """Save the simulated world's true robot pose (physics state for the next round)."""
+    """Save the simulated world's true robot pose (physics state for the next round),
+    atomically: a full disk leaves the earlier file or none, never a cut one."""
     if world is None:
         return
     p = world.truth_pose
@@ -90,7 +94,16 @@ def write_sim_state(capture_dir: Path, world) -> None:
         "robot": {"x": p.x, "y": p.y, "theta": p.theta},
         "t": world.t,
     }
-    (Path(capture_dir) / SIM_STATE).write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    dest = Path(capture_dir) / SIM_STATE
+    tmp = dest.with_name(f".{SIM_STATE}.{os.getpid()}.part")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(doc, indent=1))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, dest)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def map_fingerprint(sfm_dir: Path) -> str:
@@ -291,18 +304,35 @@ def run_adaptive(
     Raises:
         FileNotFoundError: an input of the previous round is missing (names it).
     """
-    from scenebot.capture import archive_previous, make_backend, session_record
+    from scenebot.capture import capture_lock
+
+    if round_index < 1:
+        raise ValueError("adaptive capture is for rounds >= 1 (round 0 explores)")
+    if cfg.robot == "photos":
+        raise ValueError("robot: photos has no robot to send to goals; set max_rounds: 1")
+    with capture_lock(capture_dir):
+        return _run_adaptive(cfg, Path(capture_dir), round_index, Path(prev_round_dir), progress)
+
+
+def _run_adaptive(
+    cfg: Config, capture_dir: Path, round_index: int, prev: Path, progress: bool
+) -> dict:
+    """:func:`run_adaptive` holding the capture lock."""
+    from scenebot.capture import (
+        SESSION_LOG,
+        finish_capture,
+        make_backend,
+        save_sim_state,
+        session_record,
+        start_capture,
+        stop_message,
+    )
     from scenebot.follow import PathFollower
     from scenebot.localize import make_localizer
     from scenebot.plan.navgrid import NavGrid
     from scenebot.plan.path import GridPlanner
     from scenebot.plan.stage import robot_xy_for_camera
 
-    if round_index < 1:
-        raise ValueError("adaptive capture is for rounds >= 1 (round 0 explores)")
-    if cfg.robot == "photos":
-        raise ValueError("robot: photos has no robot to send to goals; set max_rounds: 1")
-    prev = Path(prev_round_dir)
     need = {
         "map": prev / "sfm" / "images.bin",
         "descriptors": prev / "sfm" / "point_descriptors.npz",
@@ -326,18 +356,15 @@ def run_adaptive(
     paths = paths_doc.get("paths", [])
     budget = min(acfg.max_photos, per_goal * len(paths))
 
-    capture_dir = Path(capture_dir)
-    capture_dir.mkdir(parents=True, exist_ok=True)
-    archive_previous(capture_dir)
-    (capture_dir / "images").mkdir(exist_ok=True)
-    (capture_dir / "nav").mkdir(exist_ok=True)
+    start_capture(capture_dir, ("images", "nav"))
     robot, camera, world = make_backend(cfg, capture_dir, start=read_sim_state(prev / "capture"))
     planner = SnappingPlanner(
         GridPlanner(NavGrid.load(need["grid"]), cfg.plan.simplify_factor), cfg.plan.goal_snap_m
     )
     initial = map_end_pose(prev / "sfm", cfg.camera_mount())
     truth = getattr(robot, "truth_record", None)
-    session = capture_dir / "session.jsonl"
+    session = capture_dir / SESSION_LOG
+    failing = False
     outcomes: list[dict] = []
     inliers: list[int] = []
     n_photos = 0
@@ -403,13 +430,15 @@ def run_adaptive(
             spare = unused_backups(goals_doc, paths) if acfg.replace_abandoned else []
             outcomes, n_photos = visit_goals(paths, spare, go, shoot, event, per_goal, budget)
         except BaseException as exc:
-            clog.write({"type": "event", "t": robot.now, "event": "error", "error": repr(exc)})
+            failing = True
+            stop = stop_message(exc, clog, robot)
+            if stop is not None:
+                raise stop from None
             raise
         finally:
             bar.close()
             robot.stop()
-            if world is not None:
-                write_sim_state(capture_dir, world)
+            save_sim_state(capture_dir, world, failing)
         summary = {
             "round": round_index,
             "photos": n_photos,
@@ -425,14 +454,13 @@ def run_adaptive(
         }
         if world is not None:
             summary["max_penetration_m"] = world.max_penetration_m
+        write_faults(clog, robot)  # the faults recovered after the last photo or event
         clog.write({"type": "end", "t": robot.now, "reason": "goals visited", **summary})
-    for img in [*(capture_dir / "images").glob("*.jpg"), *(capture_dir / "nav").glob("*.jpg")]:
-        img.chmod(stat.S_IRUSR | stat.S_IRGRP | stat.S_IROTH)
-    out = capture_dir / "log.jsonl"
-    if out.exists():
-        out.unlink()
-    os.link(session, out)
-    plot_round(out, capture_dir / "trajectory.png", need["grid"], paths_doc)
+    finish_capture(
+        capture_dir,
+        lambda out, png: plot_round(out, png, need["grid"], paths_doc),
+        ("images", "nav"),
+    )
     return summary
 
 

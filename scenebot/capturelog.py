@@ -26,19 +26,27 @@ Record types (field ``type``):
     ``goal_abandoned``, ``goal_skipped`` with ``goal_index``, ``goal``, ``reason`` and, for a
     backup goal tried in place of an abandoned one, ``backup_for``), ``odometry``, plus
     event-specific fields; simulator events carry ``truth`` with the robot pose.
+``fault``
+    ``t``, ``fault`` (``brick_reboot`` with ``during``, ``reply_lost``, ``reply_garbled``,
+    ``link_lost``, ``watchdog_stop``, ``motor_start_resent``), ``recovered`` (true): a fault
+    of the NXT link or brick that the driver recovered from, written before the next record.
 ``end`` (last line of a complete capture)
     ``t``, ``photos``, ``reason``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
+
+from scenebot.jpeg import space_left
 
 
 def json_default(o: Any) -> Any:
@@ -52,22 +60,67 @@ def json_default(o: Any) -> Any:
     raise TypeError(f"cannot write {type(o).__name__} as JSON")
 
 
+class LogWriteError(RuntimeError):
+    """A capture log record could not be written (disk full, I/O error): the capture stops.
+    The log keeps every earlier record whole (a cut record is taken back)."""
+
+
 class CaptureLog:
-    """Append-only JSONL writer that flushes and fsyncs every record (nothing lost on a crash)."""
+    """Append-only JSONL writer that writes and fsyncs every record whole (nothing lost on
+    a crash, no half record on a full disk).
+
+    Records go straight to the file descriptor (no buffer that could fail again on close);
+    a record that cannot be written completely is cut off again, so the log stays readable
+    and a later record never joins a half line.
+    """
 
     def __init__(self, path: Path):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh: IO[str] = open(self.path, "a", encoding="utf-8")  # noqa: SIM115
+        self.counts: Counter[str] = Counter()
+        """Records written by this writer, by ``type``."""
+        try:
+            self._fd: int | None = os.open(
+                self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644
+            )
+        except OSError as exc:
+            raise LogWriteError(
+                f"could not open the capture log {self.path}: {exc.strerror or exc}"
+            ) from None
+
+    def fileno(self) -> int:
+        if self._fd is None:
+            raise ValueError(f"{self.path}: the capture log is closed")
+        return self._fd
 
     def write(self, record: dict) -> None:
-        self._fh.write(json.dumps(record, default=json_default, sort_keys=False) + "\n")
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+        """Append ``record`` as one line and fsync it.
+
+        Raises:
+            LogWriteError: it could not be written whole (the message says how much space
+                is left); the log is as it was before.
+        """
+        data = (json.dumps(record, default=json_default, sort_keys=False) + "\n").encode()
+        fd = self.fileno()
+        start = os.fstat(fd).st_size
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+            self.counts[str(record.get("type"))] += 1
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, start)  # take the cut record back
+            raise LogWriteError(
+                f"could not write to the capture log {self.path}: {exc.strerror or exc} "
+                f"({space_left(self.path)})"
+            ) from None
 
     def close(self) -> None:
-        if not self._fh.closed:
-            self._fh.close()
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
     def __enter__(self) -> CaptureLog:
         return self

@@ -15,7 +15,7 @@ import logging
 import sys
 from pathlib import Path
 
-from scenebot.config import ConfigError, from_sections, load_config, validate_config
+from scenebot.config import ConfigError, from_sections, load_config
 
 
 def _config(args) -> object:
@@ -163,9 +163,8 @@ def cmd_schema(args) -> int:
 
 
 def cmd_check_config(args) -> int:
-    import yaml
-
-    cfg = validate_config(yaml.safe_load(Path(args.path).read_text()), args.path)
+    # the workflow's own check: typed model and JSON schema (rules/common.smk)
+    cfg = load_config(args.path)
     print(f"{args.path}: valid (scene {cfg.scene!r}, robot {cfg.robot!r})")
     return 0
 

@@ -10,13 +10,21 @@ This module must stay light to import: the Snakefile loads it at every start.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    model_validator,
+)
 
 from scenebot.dense.config import DenseConfig
 from scenebot.evaluate.config import EvaluateConfig
@@ -32,6 +40,14 @@ SCHEMA_PATH = Path(__file__).with_name("config.schema.json")
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+def _received(info: ValidationInfo, *sections: str) -> bool:
+    """Whether a check across sections applies: always to a whole config; to stage
+    parameters (:func:`from_sections`: a stage gets only the sections it reads) only when
+    every section the check reads was received. The workflow checked the whole config."""
+    received = (info.context or {}).get("sections")
+    return received is None or all(s in received for s in sections)
 
 
 class StartPose(_Model):
@@ -327,8 +343,20 @@ class PhotosConfig(_Model):
     """Bring-your-own photos (``robot: photos``)."""
 
     folder: Path | None = Field(
-        None, description="Folder of JPEGs (not recursive) that make round 0; never modified."
+        None,
+        description="Folder of photos (JPEG or PNG, suffixes in any case; not recursive) that "
+        "make round 0; never modified. The same photo twice is used once.",
     )
+
+
+ROBOT_SECTIONS: dict[str, tuple[str, ...]] = {
+    "sim": ("world", "sim"),
+    # the camera mount (sim.camera) places photos on the robot; no simulated world
+    "nxt": ("sim", "nxt"),
+    "nxt-emulated": ("world", "sim", "nxt", "nxt_emulator"),
+    "photos": ("photos",),
+}
+"""The config sections each ``robot:`` backend reads."""
 
 
 class Config(_Model):
@@ -344,7 +372,7 @@ class Config(_Model):
         description=(
             "Robot backend: the simulator, a LEGO NXT on a serial port (nxt.port), the NXT "
             "driver against the brick emulator on a pseudo-terminal backed by the simulator, "
-            "or `photos`: no robot, round 0 is the folder of JPEGs in photos.folder."
+            "or `photos`: no robot, round 0 is the folder of photos in photos.folder."
         ),
     )
     seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
@@ -377,15 +405,19 @@ class Config(_Model):
     evaluate: EvaluateConfig = EvaluateConfig()
 
     @model_validator(mode="after")
-    def _photos_folder(self) -> Config:
+    def _photos_folder(self, info: ValidationInfo) -> Config:
+        if not _received(info, "photos"):
+            return self
         if self.robot == "photos" and self.photos.folder is None:
-            raise ValueError("robot: photos needs photos.folder (a folder of JPEG photos)")
+            raise ValueError("robot: photos needs photos.folder (a folder of JPEG or PNG photos)")
         return self
 
     @model_validator(mode="after")
-    def _camera_mount(self) -> Config:
+    def _camera_mount(self, info: ValidationInfo) -> Config:
         """The camera mount is configured once (sim.camera); following and the map's scale
         (sfm.camera_offset_m) use it unless set explicitly."""
+        if not _received(info, "sim"):
+            return self  # stage parameters: the sections received hold the derived values
         cam, fol = self.sim.camera, self.follow
         update = {}
         if "camera_forward_m" not in fol.model_fields_set:
@@ -408,6 +440,11 @@ class Config(_Model):
             object.__setattr__(self, "sfm", sfm)
         return self
 
+    def robot_sections(self) -> tuple[str, ...]:
+        """The config sections the configured robot reads (with ``exploration``, a capture's
+        params): changing another robot's settings never re-takes a capture."""
+        return ROBOT_SECTIONS[self.robot]
+
     def round_limit(self) -> int:
         """Rounds the campaign runs at most: ``max_rounds``, or 1 for ``robot: photos``
         (a folder of photos is round 0, and no robot can take more)."""
@@ -423,42 +460,342 @@ class ConfigError(ValueError):
     """An invalid configuration; the message names each bad key and what is allowed."""
 
 
-def _format_errors(exc: ValidationError, source: str) -> str:
+_NULLS = frozenset({"null", "Null", "NULL", "~"})
+"""YAML's spellings of null, as text: nested ``--config`` values arrive as text (Snakemake
+reads them with YAML's BaseLoader), ``world={builtin: null}`` as ``'null'``."""
+
+
+def _model_of(annotation: Any) -> type[BaseModel] | None:
+    """The model class in a field's annotation (``StartPose | None`` -> ``StartPose``)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()):
+        if isinstance(arg, type) and issubclass(arg, BaseModel):
+            return arg
+    return None
+
+
+def _example(loc: tuple) -> str:
+    """``", e.g. <default>"`` for the field at ``loc`` (a right value to copy), or ``""``."""
+    model: type[BaseModel] | None = Config
+    default: Any = None
+    for part in loc:
+        if model is None or not isinstance(part, str) or part not in model.model_fields:
+            return ""
+        field = model.model_fields[part]
+        model = _model_of(field.annotation)
+        default = None if field.is_required() else field.get_default(call_default_factory=True)
+    if default is None or isinstance(default, (bool, BaseModel)):
+        return ""
+    return f", e.g. {str(default)!r}" if isinstance(default, Path) else f", e.g. {default!r}"
+
+
+_EXPECTED = {
+    **dict.fromkeys(
+        ("int_type", "int_parsing", "int_from_float", "int_parsing_size"), "a whole number"
+    ),
+    **dict.fromkeys(("float_type", "float_parsing", "finite_number"), "a number"),
+    **dict.fromkeys(("bool_type", "bool_parsing"), "true or false"),
+    **dict.fromkeys(("model_type", "model_attributes_type", "dict_type"), "a section"),
+    "string_type": "text",
+    "list_type": "a list",
+    "path_type": "a path",
+}
+
+
+def _is_nan(value: Any) -> bool:
+    if isinstance(value, str):
+        return value.strip().lower() in ("nan", ".nan", "+nan", "-nan")
+    return isinstance(value, float) and math.isnan(value)
+
+
+def _message(err: dict) -> str:
+    """One error of the typed model as ``got <value>; <what to write instead>``."""
+    kind, loc, value = err["type"], err["loc"], err.get("input")
+    if kind == "extra_forbidden":
+        return "unknown key (check its spelling; `scenebot schema` lists all keys)"
+    if kind == "missing":
+        return "missing: this key is required here"
+    if kind == "literal_error":
+        return f"got {value!r}; allowed values: {err.get('ctx', {}).get('expected', '')}"
+    if kind in ("value_error", "assertion_error"):
+        return err["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    if _is_nan(value):
+        return f"got {value!r}; expected a number{_example(loc)}"
+    expected = _EXPECTED.get(kind)
+    if expected == "a section":
+        return f"got {value!r}; expected a section of keys (a mapping)"
+    if expected == "text":
+        return f"got {value!r}; expected text{_example(loc)} (quote it)"
+    if expected == "true or false":
+        return f"got {value!r}; expected true or false"
+    if expected is not None:
+        return f"got {value!r}; expected {expected}{_example(loc)}"
+    msg = err["msg"].replace("Input should be", "must be").replace("String should", "must")
+    return f"got {value!r}; {msg}"
+
+
+def _key(loc: tuple) -> str:
+    return ".".join(str(p) for p in loc if not str(p).startswith("function-after"))
+
+
+def _report(problems: dict[str, str], source: str) -> ConfigError:
+    """One line per bad key: ``  - <key>: <what is wrong and what to write>``."""
     lines = [f"invalid configuration in {source}:"]
+    lines += [f"  - {key or '(top level)'}: {msg}" for key, msg in problems.items()]
+    return ConfigError("\n".join(lines))
+
+
+def _problems(exc: ValidationError) -> dict[str, str]:
+    problems: dict[str, str] = {}
     for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"] if not str(p).startswith("function-after"))
-        msg = err["msg"]
-        if err["type"] == "extra_forbidden":
-            msg = "unknown key (check its spelling; `scenebot schema` lists all keys)"
-        elif err["type"] == "literal_error":
-            allowed = err.get("ctx", {}).get("expected", "")
-            msg = f"got {err.get('input')!r}; allowed values: {allowed}"
-        lines.append(f"  - {loc or '(top level)'}: {msg}")
-    return "\n".join(lines)
+        key = _key(err["loc"])
+        msg = _message(err).removeprefix(f"{key}: ") if key else _message(err)
+        problems.setdefault(key, msg)  # the first error of each key
+    return problems
 
 
-def validate_config(data: dict[str, Any] | None, source: str = "config") -> Config:
-    """Validate a config mapping.
+def _replaced(data: Any, loc: tuple, value: Any = None) -> Any:
+    """A copy of ``data`` with the value at ``loc`` replaced by ``value``."""
+    if not loc:
+        return value
+    if isinstance(data, dict):
+        return {k: _replaced(v, loc[1:], value) if k == loc[0] else v for k, v in data.items()}
+    if isinstance(data, list):
+        return [_replaced(v, loc[1:], value) if i == loc[0] else v for i, v in enumerate(data)]
+    return data
+
+
+def _as_yaml(value: Any) -> Any:
+    """Text as YAML reads it (``'12'`` -> 12, ``'null'`` -> None), else ``value``."""
+    if not isinstance(value, str):
+        return value
+    try:
+        read = yaml.safe_load(value)
+    except yaml.YAMLError:
+        return value
+    return read if read is None or isinstance(read, (bool, int, float)) else value
+
+
+def _nulls_as_none(data: Any, model: type[BaseModel] | None = None) -> Any:
+    """``data`` with ``'null'`` (and YAML's other spellings, as text) made None where the key
+    may be null: ``--config 'world={builtin: office, file: null}'`` gives ``'null'``."""
+    model = Config if model is None else model
+    if not isinstance(data, dict):
+        return data
+    out = {}
+    for k, v in data.items():
+        field = model.model_fields.get(k) if isinstance(k, str) else None
+        if field is None:
+            out[k] = v
+        elif (
+            isinstance(v, str)
+            and v in _NULLS
+            and type(None) in getattr(field.annotation, "__args__", ())
+        ):
+            out[k] = None
+        elif isinstance(v, dict) and _model_of(field.annotation) is not None:
+            out[k] = _nulls_as_none(v, _model_of(field.annotation))
+        else:
+            out[k] = v
+    return out
+
+
+def _typed(data: Any, context: dict | None) -> tuple[Config | None, dict[str, str]]:
+    """The typed model of ``data``, or the problems (one message per key).
+
+    Text where the text itself is not allowed is read once more as YAML would read it: nested
+    ``--config`` values arrive as text (Snakemake reads them with YAML's BaseLoader), so
+    ``world={builtin: null}`` gives ``'null'`` and ``neighbors: [4, 8]`` gives ``['4', '8']``.
+    """
+    data = _nulls_as_none(data)
+    try:
+        return Config.model_validate(data, context=context), {}
+    except ValidationError as exc:
+        first = exc
+    patched, subs = data, {}
+    for err in first.errors():
+        loc = tuple(p for p in err["loc"] if _key((p,)))
+        value = err.get("input")
+        if isinstance(value, str) and _as_yaml(value) is not value:
+            patched = _replaced(patched, loc, _as_yaml(value))
+            subs[_key(loc)] = _message(err)
+    if not subs:
+        return None, _problems(first)
+    try:
+        return Config.model_validate(patched, context=context), {}
+    except ValidationError as exc:
+        problems = _problems(exc)
+        return None, {k: subs.get(k, msg) for k, msg in problems.items()}
+
+
+def _leaf_problems(raw: Any, normal: Any, loc: tuple = ()) -> dict[str, str]:
+    """Values the model read leniently but wrongly: true/false where a number is expected
+    (the model reads them as 1/0), and nan."""
+    if isinstance(raw, dict) and isinstance(normal, dict):
+        found: dict[str, str] = {}
+        for k, v in raw.items():
+            if k in normal:
+                found |= _leaf_problems(v, normal[k], (*loc, k))
+        return found
+    if isinstance(raw, list) and isinstance(normal, list) and len(raw) == len(normal):
+        found = {}
+        for i, (a, b) in enumerate(zip(raw, normal, strict=True)):
+            found |= _leaf_problems(a, b, (*loc, i))
+        return found
+    if isinstance(raw, bool) and not isinstance(normal, bool):
+        what = "a whole number" if isinstance(normal, int) else "a number"
+        return {_key(loc): f"got {raw!r}; expected {what}{_example(loc)}"}
+    if isinstance(normal, float) and math.isnan(normal):
+        return {_key(loc): f"got {raw!r}; expected a number{_example(loc)}"}
+    return {}
+
+
+def normalize_config(data: dict[str, Any], cfg: Config) -> dict[str, Any]:
+    """``data`` (the keys a user gave) with each value as ``cfg`` read it: ``"12"`` for a
+    whole number is 12, ``"false"`` for a switch is false, ``"null"`` is null. The workflow
+    hands this to the JSON schema (and to its rules), so the schema never sees a value the
+    typed model read as another type."""
+    return _normalized(data, cfg.model_dump(mode="json"))
+
+
+def _normalized(raw: Any, normal: Any) -> Any:
+    if isinstance(raw, dict) and isinstance(normal, dict):
+        return {k: _normalized(v, normal[k]) if k in normal else v for k, v in raw.items()}
+    return raw if _same_kind(raw, normal) else normal
+
+
+def _same_kind(raw: Any, normal: Any) -> bool:
+    """Whether ``raw`` is already ``normal`` as JSON sees it (an int is a number): such a
+    value is kept as written, so a config written right is handed on unchanged."""
+    if isinstance(raw, bool) or isinstance(normal, bool):
+        return type(raw) is type(normal) and raw == normal
+    if isinstance(raw, (int, float)) and isinstance(normal, (int, float)):
+        return raw == normal
+    if isinstance(raw, list) and isinstance(normal, list):
+        return len(raw) == len(normal) and all(map(_same_kind, raw, normal))
+    return type(raw) is type(normal) and raw == normal
+
+
+@functools.lru_cache(maxsize=1)
+def _schema_validator():
+    import jsonschema
+
+    schema = json.loads(SCHEMA_PATH.read_text())
+    return jsonschema.validators.validator_for(schema)(schema)
+
+
+def _schema_problems(data: dict[str, Any]) -> dict[str, str]:
+    """What the workflow's JSON schema (the file ``snakemake.utils.validate`` reads) says
+    about ``data``, one line per key."""
+    problems: dict[str, str] = {}
+    for err in _schema_validator().iter_errors(data):
+        key = ".".join(str(p) for p in err.absolute_path)
+        problems.setdefault(
+            key,
+            f"got {err.instance!r}; the config schema says: {err.message} (the typed model "
+            "accepts it: if scenebot/config.schema.json is stale, run `scenebot schema --write`)",
+        )
+    return problems
+
+
+def validate_config(
+    data: dict[str, Any] | None, source: str = "config", *, sections: Any = None
+) -> Config:
+    """Validate a config mapping as a YAML file or Snakemake's ``config`` gives it.
+
+    Values are read by the type of their key (``photos: "12"`` is 12; nested ``--config``
+    values, which Snakemake passes as text, too), then the values as read must pass the JSON
+    schema the workflow validates with (:func:`normalize_config`): ``scenebot check-config``
+    and the workflow accept and refuse the same files.
+
+    Args:
+        data: the mapping.
+        source: where it came from, for the message.
+        sections: stage parameters only (:func:`from_sections`): the top-level sections
+            received; checks across sections apply only to those (a stage's config holds only
+            the sections it reads, and the workflow checked the whole config).
 
     Raises:
-        ConfigError: with one line per bad key naming it and the allowed values.
+        ConfigError: one line per bad key: ``  - <key>: got <value>; <what to write>``.
     """
-    try:
-        return Config.model_validate(data or {})
-    except ValidationError as exc:
-        raise ConfigError(_format_errors(exc, source)) from None
+    data = {} if data is None else data
+    context = None if sections is None else {"sections": frozenset(sections)}
+    cfg, problems = _typed(data, context)
+    if cfg is None:
+        raise _report(problems, source)
+    normal = cfg.model_dump(mode="json")
+    problems = _leaf_problems(data, normal)
+    if not problems and sections is None:
+        problems = _schema_problems(_normalized(data, normal))
+    if problems:
+        raise _report(problems, source)
+    return cfg
 
 
 def load_config(path: Path | str) -> Config:
-    """Read and validate a YAML config file."""
+    """Read and validate a YAML config file (see :func:`validate_config`).
+
+    Raises:
+        ConfigError: the file is missing, not YAML, not a mapping, or a value is wrong.
+    """
+    return validate_config(read_config_file(path), str(path))
+
+
+def read_config_file(path: Path | str) -> dict[str, Any]:
+    """The mapping of a YAML config file (empty: no keys), with a clear error naming it.
+
+    Raises:
+        ConfigError: the file is missing, not valid YAML, or not keys and values.
+    """
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"config file {path} not found (copy config.yaml from the repository)")
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    return validate_config(data, str(path))
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"{path}: not a config file: expected keys and values (a YAML mapping such as "
+            f"`scene: office`), got {type(data).__name__} {str(data)[:60]!r}"
+        )
+    return data
+
+
+CONFIG_SUFFIXES = (".yaml", ".yml", ".json")
+
+
+def check_config_files(paths: list[Path | str], results: Path | str = "results") -> None:
+    """The files Snakemake read as ``--configfile``: each must look like a config file.
+
+    Snakemake reads every word after ``--configfile`` as a config file, so
+    ``--configfile my.yaml results/my/round_000/capture/log.jsonl`` reads the target too.
+    A missing or unreadable one stops Snakemake before the workflow starts (with its own
+    message); one it could read (a JSON result, say) is named here.
+
+    Raises:
+        ConfigError: naming the file and the order that works.
+    """
+    results = Path(results).resolve()
+    for path in paths:
+        path = Path(path)
+        if path.resolve().is_relative_to(results):
+            what = "a result of the workflow"
+        elif path.suffix.lower() not in CONFIG_SUFFIXES:
+            what = "its name does not end in .yaml, .yml or .json"
+        else:
+            continue
+        here = Path.cwd().resolve()
+        shown = path.resolve().relative_to(here) if path.resolve().is_relative_to(here) else path
+        raise ConfigError(
+            f"--configfile got {shown}, which is not a config file ({what}): Snakemake "
+            "reads every word after --configfile as a config file. Give the targets first "
+            "(snakemake --cores 2 <targets> --configfile my.yaml) or write "
+            "--configfile=my.yaml"
+        )
 
 
 def json_schema() -> dict[str, Any]:
@@ -479,5 +816,7 @@ def section_json(cfg: Config, *keys: str) -> str:
 
 
 def from_sections(text: str) -> Config:
-    """Rebuild a :class:`Config` from :func:`section_json` output (other sections default)."""
-    return validate_config(json.loads(text), "stage parameters")
+    """Rebuild a :class:`Config` from :func:`section_json` output (other sections default;
+    checks across sections apply only to the sections received)."""
+    data = json.loads(text)
+    return validate_config(data, "stage parameters", sections=data)

@@ -30,6 +30,16 @@ class ExplorationResult:
     circles: int
 
 
+def write_faults(log: CaptureLog, robot: Robot) -> None:
+    """Write the faults the robot recovered from since the last call as ``fault`` records
+    (``{"type": "fault", "t", "fault", "recovered", ...}``; backends without
+    ``drain_faults``, such as the simulator, have none)."""
+    drain = getattr(robot, "drain_faults", None)
+    if drain is not None:
+        for record in drain():
+            log.write(record)
+
+
 class PhotoTaker:
     """Takes a photo, reads the sensors, and logs both (one ``photo`` record)."""
 
@@ -58,6 +68,7 @@ class PhotoTaker:
         truth = getattr(self.robot, "truth_record", None)
         if truth is not None:
             record["truth"] = truth()
+        write_faults(self.log, self.robot)
         self.log.write(record)
         self.count += 1
         if self.on_photo:
@@ -80,6 +91,7 @@ def log_event(log: CaptureLog, robot: Robot, event: str, **fields) -> None:
     truth = getattr(robot, "truth_record", None)
     if truth is not None:
         record["truth"] = truth()["robot"]
+    write_faults(log, robot)
     log.write(record)
 
 

@@ -258,6 +258,16 @@ class PathFollower:
         if self.log is not None:
             self.log.write(rec)
 
+    def _log_name(self, path: Path) -> str:
+        """A photo's path as the log records it: relative to the log's folder (the capture
+        folder) when inside it, so that an archived log points at its archived photos."""
+        if self.log is not None:
+            try:
+                return Path(path).resolve().relative_to(self.log.path.parent.resolve()).as_posix()
+            except ValueError:
+                pass
+        return str(path)
+
     def localize_now(self) -> PoseEstimate | LocalizationFailure:
         """Take a photo and localize it; on success it becomes the new fix."""
         dest = self.photo_dir / f"nav_g{self._goal_index:03d}_{self._photo_count:04d}.jpg"
@@ -295,11 +305,11 @@ class PathFollower:
             self._since_fix_m = 0.0
             if res is not None:
                 res.localizations += 1
-            self._event("localize", image=str(path), localization=est.as_record())
+            self._event("localize", image=self._log_name(path), localization=est.as_record())
         else:
             if res is not None:
                 res.failed_localizations += 1
-            self._event("localize_failed", image=str(path), localization=est.as_record())
+            self._event("localize_failed", image=self._log_name(path), localization=est.as_record())
         return est
 
     def _reject(self, path: Path, reason: FailureReason, cand: Pose2D, est: PoseEstimate,
@@ -307,7 +317,7 @@ class PathFollower:
         """Log a fix that is not used (``localize_rejected``) and return it as a failure."""
         if self._result is not None:
             self._result.failed_localizations += 1
-        self._event("localize_rejected", image=str(path), reason=str(reason), **fields,
+        self._event("localize_rejected", image=self._log_name(path), reason=str(reason), **fields,
                     candidate=cand.as_dict(), localization=est.as_record())  # fmt: skip
         return LocalizationFailure(
             reason, est.num_features, est.num_matches, est.num_inliers, est.timings_s

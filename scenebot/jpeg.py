@@ -8,8 +8,11 @@ a sensor database. We write all of them so any reader finds a consistent value.
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import math
 import os
+import shutil
+from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
@@ -74,9 +77,133 @@ def write_jpeg(
     ifd[TAG_FOCAL_PLANE_UNIT] = UNIT_CM
     ifd[TAG_DATETIME_ORIGINAL] = (when or _dt.datetime.now()).strftime("%Y:%m:%d %H:%M:%S")
     tmp = path.with_name(path.name + ".part")
-    Image.fromarray(np.ascontiguousarray(rgb)).save(tmp, "JPEG", quality=quality, exif=exif)
-    os.replace(tmp, path)
+    try:
+        Image.fromarray(np.ascontiguousarray(rgb)).save(tmp, "JPEG", quality=quality, exif=exif)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)  # a failed save leaves no partial file behind
     return path
+
+
+class PhotoWriteError(RuntimeError):
+    """A photo could not be stored complete (disk full, I/O error, or a photo of that name
+    exists): the capture stops. The message names the photo and the space left."""
+
+
+def space_left(path: Path) -> str:
+    """``"41.0 kB free of 400.0 kB on the file system of <folder>"`` for the nearest existing
+    folder of ``path`` (for messages about failed writes)."""
+    folder = Path(path)
+    while not folder.is_dir() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        du = shutil.disk_usage(folder)
+    except OSError as exc:
+        return f"free space of {folder} unknown ({exc.strerror})"
+    return f"{_size(du.free)} free of {_size(du.total)} on the file system of {folder}"
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000.0
+    raise AssertionError
+
+
+def jpeg_problem(path: Path) -> str | None:
+    """Why the file at ``path`` is not a complete JPEG (None: it is one): the SOI marker
+    first, the EOI marker last, and the whole image decodes."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(2)
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(0, size - 2))
+            tail = fh.read(2)
+        if head != b"\xff\xd8":
+            return f"is not a JPEG ({size} bytes, no start-of-image marker)"
+        if tail != b"\xff\xd9":
+            return f"is a truncated JPEG ({size} bytes, no end-of-image marker)"
+        with Image.open(path) as im:
+            im.load()
+    except OSError as exc:  # PIL's decode errors are OSErrors too
+        return f"does not decode ({exc})"
+    return None
+
+
+def _fsync_dir(folder: Path) -> None:
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    except OSError:  # some file systems cannot sync a directory; the data is synced
+        pass
+    finally:
+        os.close(fd)
+
+
+def publish(tmp: Path, dest: Path) -> None:
+    """Give the complete file ``tmp`` the name ``dest``, atomically, never replacing a file.
+
+    A hard link fails if ``dest`` exists (the atomic test-and-set); then ``tmp`` goes.
+    File systems without hard links (FAT on an SD card) get a check and a rename.
+
+    Raises:
+        FileExistsError: ``dest`` exists (nothing changed).
+    """
+    try:
+        os.link(tmp, dest)
+    except FileExistsError:
+        raise
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK):
+            raise
+        if os.path.lexists(dest):
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(dest)) from None
+        os.rename(tmp, dest)
+    else:
+        os.unlink(tmp)
+    _fsync_dir(dest.parent)
+
+
+def store_photo(dest: Path, write: Callable[[Path], object]) -> Path:
+    """Store a photo at ``dest`` complete or not at all, never overwriting one.
+
+    ``write(tmp)`` writes the photo to a temporary name in the same folder; the file is then
+    fsynced, verified to be a complete, decodable JPEG (a disk that fills up can leave a
+    short file without any error), and renamed to ``dest`` without replacing a file.
+
+    Raises:
+        PhotoWriteError: ``dest`` exists, the write failed (the message says how much space
+            is left there) or the written file is not a complete JPEG. No file is left.
+    """
+    dest = Path(dest)
+    if os.path.lexists(dest):
+        raise PhotoWriteError(f"photo {dest} already exists: refusing to overwrite it")
+    tmp = dest.with_name(f".{dest.name}.{os.getpid()}.part")
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        problem = jpeg_problem(tmp)
+        if problem is not None:
+            raise PhotoWriteError(
+                f"could not store photo {dest}: the file written {problem}; the disk may be "
+                f"full ({space_left(dest)})"
+            )
+        publish(tmp, dest)
+    except PhotoWriteError:
+        raise
+    except FileExistsError:
+        raise PhotoWriteError(f"photo {dest} already exists: refusing to overwrite it") from None
+    except OSError as exc:
+        raise PhotoWriteError(
+            f"could not store photo {dest}: {exc.strerror or exc} ({space_left(dest)})"
+        ) from None
+    finally:
+        if os.path.lexists(tmp):
+            tmp.unlink()  # a failed write's partial file: never a photo of the log
+    return dest
 
 
 def read_exif_focal(img: Image.Image) -> tuple[float | None, str]:

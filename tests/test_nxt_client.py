@@ -322,3 +322,65 @@ def test_after_a_failed_reopen_requests_fail_fast():
     with pytest.raises(LinkLostError, match="is lost"):
         client.output_state(0)
     assert len(opened) == 2 and clock.t == t  # no new reopen attempts, no waiting
+
+
+# ------------------------------------------------------------------ adaptive timeouts, lost replies
+
+
+def test_rtt_estimator_floor_ewma_backoff_and_cap():
+    from scenebot.robot.nxt.client import RttEstimator
+
+    est = RttEstimator(floor_s=0.5, cap_s=4.0)
+    assert est.timeout_s == 0.5  # before any sample: the configured timeout
+    for _ in range(20):
+        est.sample(0.002)
+    assert est.timeout_s == 0.5  # a fast link never goes below the configured timeout
+    est.sample(0.6)  # one slow round trip: srtt + 4 rttvar grows past it at once
+    assert est.timeout_s > 0.6
+    for _ in range(60):
+        est.sample(0.6)
+    assert 0.6 < est.timeout_s < 0.7  # a steady 0.6 s link: srtt ~ 0.6, rttvar ~ 0
+    est.backoff()
+    assert est.timeout_s == pytest.approx(2 * 0.6, rel=0.1)
+    for _ in range(5):
+        est.backoff()
+    assert est.timeout_s == 4.0  # capped
+    est.sample(0.6)  # a measured round trip replaces the backed-off value
+    assert est.timeout_s < 1.0
+
+
+def test_reply_timeout_adapts_to_a_slow_link():
+    """A loaded machine: every reply takes 0.6 s, longer than the configured 0.5 s. After the
+    first timeout the client measures the round trip and stops timing out, so even commands
+    that are unsafe to repeat (LSWRITE) go through."""
+
+    def slow(tg):
+        return [(delay + 0.6, out) for delay, out in brick_answer(tg)]
+
+    client, _, _ = make(respond=slow)
+    client.keepalive()  # safe to repeat: survives the first timeout
+    for _ in range(10):
+        client.request(p.LsWrite(port=3, tx=b"\x02\x42", rx_len=1))
+    assert client.stats.timeouts == 1
+    assert client.reply_timeout_now_s > 0.6
+
+
+def test_idempotent_read_retried_while_the_brick_answers():
+    """Replies lost on a live link (the KEEPALIVE barriers are answered) do not use up the
+    retries meant for a silent brick; every recovered loss is reported as a fault event."""
+    lost = []
+
+    def respond(tg):
+        if p.parse_command(tg) == p.GetOutputState(port=1) and len(lost) < 4:
+            lost.append(tg)
+            return []
+        return brick_answer(tg)
+
+    client, brick, _ = make(respond=respond)
+    assert client.output_state(1).rotation_count == 42  # 5th attempt, retries=2
+    assert [w[3] for w in brick.written] == [0x06, 0x0D] * 4 + [0x06]
+    events = client.drain_faults()
+    assert len(events) == 1 and events[0]["type"] == "fault"
+    assert events[0]["fault"] == "reply_lost" and events[0]["command"] == "GetOutputState"
+    assert events[0]["attempts"] == 5 and events[0]["recovered"] is True
+    assert client.drain_faults() == []

@@ -169,8 +169,9 @@ def assert_photos_intact(emu, cap_dir: Path, expected: int) -> None:
 
 
 def capture_with_fault(robot, cam, faults_list: list[int], cap_dir: Path, name: str) -> None:
-    """Capture with a fault on the command that switches the camera port off (the 2nd)."""
-    faults_list.append(_next(robot, 1))
+    """Capture with a fault on the command that switches the camera port off (the 5th: the
+    reboot check reads both wheel counters and the front bumper, then the port goes on)."""
+    faults_list.append(_next(robot, 4))
     cam.capture(cap_dir / name)
 
 
@@ -181,15 +182,17 @@ def test_fault_dropped_replies(tmp_path):
     with robot:
         n = _next(robot, 0)
         # n: GETOUTPUTSTATE (dropped) -> n+1 KEEPALIVE barrier -> n+2 retry; n+3 GETOUTPUTSTATE;
-        # n+4 / n+5: both wheels started back to back without replies; n+6: read-back of the
-        # left wheel (dropped) -> n+7 barrier -> n+8 retry
-        faults.drop_reply_at.extend([n, n + 6])
+        # n+4 GETINPUTVALUES of the front bumper (the reboot check, after the counters);
+        # n+5 / n+6: both wheels started back to back without replies; n+7: read-back of the
+        # left wheel (dropped) -> n+8 barrier -> n+9 retry
+        faults.drop_reply_at.extend([n, n + 7])
         r = robot.drive(0.3)
         gos1, ka = p.GetOutputState(port=1), p.KeepAlive()
-        assert emu.commands[n : n + 4] == [gos1, ka, gos1, p.GetOutputState(port=2)]
-        starts = emu.commands[n + 4 : n + 6]
+        assert emu.commands[n : n + 5] == [gos1, ka, gos1, p.GetOutputState(port=2),
+                                           p.GetInputValues(port=0)]  # fmt: skip
+        starts = emu.commands[n + 5 : n + 7]
         assert all(isinstance(c, p.SetOutputState) and not c.reply for c in starts)
-        assert emu.commands[n + 6 : n + 9] == [gos1, ka, gos1]
+        assert emu.commands[n + 7 : n + 10] == [gos1, ka, gos1]
         assert r.status is MotionStatus.COMPLETED and r.distance_m == pytest.approx(0.3, abs=0.01)
         assert sum(c.tacho_limit > 0 for c in emu.commands if isinstance(c, p.SetOutputState)) == 2
         capture_with_fault(robot, cam, faults.drop_reply_at, tmp_path / "cap", "x.jpg")
@@ -210,12 +213,13 @@ def test_fault_lost_start_command_is_resent(tmp_path):
     emu = robot.emulator
     with robot:
         n = _next(robot, 0)
-        faults.drop_command_at.append(n + 2)  # the left wheel's start never arrives
+        faults.drop_command_at.append(n + 3)  # the left wheel's start never arrives
         r = robot.drive(0.3)
-        assert isinstance(emu.commands[n + 2], p.SetOutputState)  # right wheel (n+2 was lost)
+        assert isinstance(emu.commands[n + 3], p.SetOutputState)  # right wheel (n+3 was lost)
         resent = [c for c in emu.commands[n:] if isinstance(c, p.SetOutputState) and c.reply]
         assert resent[0].port == robot.left.port and resent[0].tacho_limit > 0
         assert r.status is MotionStatus.COMPLETED
+        assert [f["fault"] for f in robot.drain_faults()] == ["motor_start_resent"]
         assert world.truth_pose.x == pytest.approx(0.3, abs=0.015)
     assert not emu.motors_running()
 
@@ -226,11 +230,11 @@ def test_fault_late_replies(tmp_path):
     emu = robot.emulator
     with robot:
         n = _next(robot, 0)
-        faults.late_reply_at.extend([n, n + 6])  # a query and the start read-back
+        faults.late_reply_at.extend([n, n + 7])  # a query and the start read-back
         r = robot.drive(0.3)
         gos1, ka = p.GetOutputState(port=1), p.KeepAlive()
         assert emu.commands[n : n + 3] == [gos1, ka, gos1]
-        assert emu.commands[n + 6 : n + 9] == [gos1, ka, gos1]
+        assert emu.commands[n + 7 : n + 10] == [gos1, ka, gos1]
         assert r.status is MotionStatus.COMPLETED and r.distance_m == pytest.approx(0.3, abs=0.01)
         time.sleep(0.6)
         s = robot.sense()  # the late copies are drained, not taken as answers
@@ -345,7 +349,7 @@ def test_sleep_timer_expires_without_keepalive(tmp_path):
 
 
 def test_bad_port_busy_port_silent_brick_missing_inbox(tmp_path):
-    with pytest.raises(PortNotFoundError, match=r"does not exist.*robot.nxt.port"):
+    with pytest.raises(PortNotFoundError, match=r"does not exist.*check nxt\.port"):
         connect(NxtConfig(port=str(tmp_path / "rfcomm9")))
     with brick(tmp_path) as emu:
         held = connect(NxtConfig(port=emu.port_path))
@@ -371,7 +375,7 @@ def test_unplugged_or_swapped_sensor_is_named(tmp_path):
     cam = {"inbox": str(tmp_path / "inbox")}
     with brick(tmp_path) as emu:
         cfg = NxtConfig(port=emu.port_path, camera=cam, compass=4, ultrasonic=3)  # swapped
-        with pytest.raises(RobotError, match=r"compass on sensor port 4 .*robot\.nxt\.compass"):
+        with pytest.raises(RobotError, match=r"compass on sensor port 4 .* nxt\.compass"):
             make_nxt_robot(cfg, sigterm=False)
         del emu.devices[emu.us_port]  # ultrasonic unplugged
         with pytest.raises(RobotError, match=r"ultrasonic sensor on sensor port 4 does not"):
@@ -468,7 +472,9 @@ def test_watchdog_stops_motors_when_control_loop_stalls(tmp_path):
     with robot:
         robot._heartbeat()
         robot._moving = True  # as inside a motion
-        robot._start_pair(40, 40, 0)  # no tacho limit: only the watchdog can stop it
+        for port in (robot.left.port, robot.right.port):  # no tacho limit (no motion sends
+            # this): only the watchdog can stop it
+            robot.client.request(p.SetOutputState(port=port, power=40, mode=7, run_state=0x20))
         assert emu.motors_running()
         time.sleep(1.0)  # the control loop "hangs"
         assert not emu.motors_running()
@@ -523,3 +529,157 @@ def test_short_pulse_is_missed_like_chdk_and_times_out_cleanly(tmp_path):
         cam.capture(tmp_path / "cap" / "b.jpg")  # a long enough pulse works
     assert_photos_intact(emu, tmp_path / "cap", 1)
     assert emu.motors[robot.camera_port].power == 0
+
+
+# ---------------------------------------------------------------------- recovered faults
+
+
+def _reboot_next(robot) -> None:
+    """The brick reboots just before the next command it receives."""
+    robot.emulator.cfg.faults.reboot_at.append(_next(robot, 0))
+
+
+def _assert_odometry_matches_truth(robot, world) -> None:
+    odo, truth = robot.sense().odometry, world.truth_pose
+    assert odo.x == pytest.approx(truth.x, abs=0.015) and odo.y == pytest.approx(truth.y, abs=0.015)
+    dth = math.atan2(math.sin(odo.theta - truth.theta), math.cos(odo.theta - truth.theta))
+    assert abs(dth) < 0.03
+
+
+@pytest.mark.parametrize("point", ["turn", "drive", "photo", "after_photo", "sense"])
+def test_reboot_before_any_step_is_recovered_with_odometry_intact(tmp_path, point):
+    """A brick reboot (counters reset, sensor modes lost) just before a turn, a drive, a photo
+    trigger, right after a photo, or before a sensor read: every step checks for a reboot
+    before it uses the wheel counters, so odometry continues from the last good pose, the
+    step itself does what was asked, and the recovered fault is reported."""
+    world = BoxWorld()
+    robot, cam = robot_on_emulator(tmp_path, world)
+    emu = robot.emulator
+    with robot:
+        assert robot.drive(0.3).status is MotionStatus.COMPLETED
+        assert robot.turn(0.6).status is MotionStatus.COMPLETED
+        robot.drain_faults()
+        x0, th0 = world.truth_pose.x, world.truth_pose.theta
+        if point == "turn":
+            _reboot_next(robot)
+            r = robot.turn(math.pi / 2)
+            assert r.status is MotionStatus.COMPLETED
+            assert r.angle_rad == pytest.approx(math.pi / 2, abs=0.03)
+            assert world.truth_pose.theta - th0 == pytest.approx(math.pi / 2, abs=0.05)
+        elif point == "drive":
+            _reboot_next(robot)
+            r = robot.drive(0.3)
+            assert r.status is MotionStatus.COMPLETED
+            assert r.distance_m == pytest.approx(0.3, abs=0.01)
+            assert math.hypot(world.truth_pose.x - x0, world.truth_pose.y) > 0.25
+        elif point == "photo":
+            _reboot_next(robot)
+            cam.capture(tmp_path / "cap" / "a.jpg")
+            assert robot.turn(0.5).status is MotionStatus.COMPLETED
+        elif point == "after_photo":  # the issue's case: reboot after the trigger, then a turn
+            trigger = cam.trigger
+
+            def trigger_then_reboot():
+                trigger()
+                _reboot_next(robot)
+
+            cam.trigger = trigger_then_reboot
+            cam.capture(tmp_path / "cap" / "a.jpg")
+            r = robot.turn(0.5)
+            assert r.status is MotionStatus.COMPLETED
+            assert r.angle_rad == pytest.approx(0.5, abs=0.03)
+            assert world.truth_pose.theta - th0 == pytest.approx(0.5, abs=0.05)
+        else:
+            _reboot_next(robot)
+            s = robot.sense()
+            assert s.ultrasonic_cm > 0
+        assert emu.reboots == 1 and robot.reboots == 1
+        faults = robot.drain_faults()
+        reboots = [f for f in faults if f["fault"] == "brick_reboot"]
+        assert len(reboots) == 1 and reboots[0]["type"] == "fault" and reboots[0]["recovered"]
+        assert reboots[0]["during"] == {"after_photo": "turn"}.get(point, point)
+        _assert_odometry_matches_truth(robot, world)
+        assert robot.drive(0.2).status is MotionStatus.COMPLETED  # sensors work again
+        _assert_odometry_matches_truth(robot, world)
+    assert not emu.motors_running()
+
+
+def test_sensor_reads_and_motions_survive_drop_reply_prob(tmp_path):
+    """One reply in ten lost, on every command: register reads are redone as transactions,
+    reads retried, motor commands recovered as before."""
+    faults = FaultConfig(drop_reply_prob=0.1, seed=3)
+    world = BoxWorld()
+    robot, cam = robot_on_emulator(tmp_path, world, faults=faults, reply_timeout_s=0.15)
+    emu = robot.emulator
+    with robot:
+        for i in range(4):
+            s = robot.sense()
+            assert 0 < s.ultrasonic_cm <= 255 and 0.0 <= s.compass_deg < 360.0
+            cam.capture(tmp_path / "cap" / f"{i}.jpg")
+            assert robot.turn(0.4).status is MotionStatus.COMPLETED
+        assert robot.drive(0.2).status is MotionStatus.COMPLETED
+        _assert_odometry_matches_truth(robot, world)
+        faults.drop_reply_prob = 0.0
+        lost = [f for f in robot.drain_faults() if f["fault"] == "reply_lost"]
+    assert robot.client.stats.timeouts >= 5 and lost
+    assert not emu.motors_running()
+    assert_photos_intact(emu, tmp_path / "cap", 4)
+
+
+def test_slow_link_does_not_trip_the_watchdog(tmp_path):
+    """Replies later than the watchdog timeout: the control loop is waiting on the link, not
+    hung, so the watchdog lets the motion finish (the tacho limit bounds it anyway)."""
+    faults = FaultConfig(late_reply_s=0.8)
+    robot, _ = robot_on_emulator(tmp_path, faults=faults, watchdog_timeout_s=0.5)
+    with robot:
+        faults.late_reply_at.extend(_next(robot, k) for k in (8, 12))  # status polls
+        r = robot.drive(0.4)
+        assert r.status is MotionStatus.COMPLETED and robot.watchdog_trips == 0
+    assert not robot.emulator.motors_running()
+
+
+def test_every_wheel_command_is_tacho_limited(tmp_path):
+    """A host killed mid-motion (SIGKILL) leaves the motors running until the limit: the worst
+    case, because every command that powers a wheel carries a tacho limit."""
+    from scenebot.robot.nxt.robot import run_command
+
+    world = BoxWorld()
+    robot, _ = robot_on_emulator(tmp_path, world)
+    emu = robot.emulator
+    with robot:
+        robot.drive(0.3)
+        robot.turn(-1.0)
+        robot.turn_to_heading(90.0)
+        robot.drive(-0.2)
+    wheels = {robot.left.port, robot.right.port}
+    powered = [
+        c
+        for c in emu.commands
+        if isinstance(c, p.SetOutputState) and c.port in wheels and c.power != 0
+    ]
+    assert len(powered) >= 8 and all(c.tacho_limit > 0 for c in powered)
+    with pytest.raises(ValueError, match="tacho limit"):
+        run_command(1, 50, 0)
+
+
+def test_emulator_that_fell_behind_drops_the_backlog(tmp_path):
+    """After a slow render the physics catches up at most 200 steps, then drops the rest of
+    the backlog: it must not keep running behind (and racing) from then on."""
+    with brick(tmp_path) as emu, emu._lock:
+        emu._wall0 -= 10.0  # as if the loop had stalled for 10 s
+        emu._advance_physics()
+        t1 = emu.world.t
+        emu._advance_physics()
+        assert emu.world.t - t1 < 0.1  # no backlog left: a few steps at most
+
+
+def test_sensor_failure_is_a_clear_robot_error(tmp_path):
+    from scenebot.robot.base import RobotError
+
+    robot, _ = robot_on_emulator(tmp_path, reply_timeout_s=0.1, retries=0)
+    with robot:
+        robot.client.retries = 0
+        robot.emulator.cfg.faults.drop_reply_prob = 1.0  # the brick goes silent
+        with pytest.raises(RobotError, match=r"sensors.*check the Bluetooth link"):
+            robot.sense()
+        robot.emulator.cfg.faults.drop_reply_prob = 0.0

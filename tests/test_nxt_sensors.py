@@ -26,18 +26,25 @@ class I2CBrick:
     """Scripted brick for one I2C port: busy for ``busy`` LSWRITEs, pending for ``pending``
     LSGETSTATUS polls, then registers from ``regs``; ``bus_errors`` failed transactions."""
 
-    def __init__(self, regs, sensor_type=0x0B, busy=0, pending=0, bus_errors=0):
+    def __init__(self, regs, sensor_type=0x0B, busy=0, pending=0, bus_errors=0, lose=None):
         self.regs, self.sensor_type = dict(regs), sensor_type
         self.busy, self.pending, self.bus_errors = busy, pending, bus_errors
+        self.lose = dict(lose or {})  # command class -> replies to lose (command executed)
         self.rx = b""
         self.log: list[p.Command] = []
 
     def __call__(self, telegram):
         cmd = p.parse_command(telegram)
         self.log.append(cmd)
+        lost = self.lose.get(type(cmd), 0) > 0
+        if lost:
+            self.lose[type(cmd)] -= 1
 
         def out(reply, status=0):
-            return [(0.0, p.frame(reply.encode(status)))]
+            return [] if lost else [(0.0, p.frame(reply.encode(status)))]
+
+        if isinstance(cmd, p.KeepAlive):
+            return out(p.KeepAliveReply(sleep_limit_ms=600000))
 
         if isinstance(cmd, p.SetInputMode):
             return out(p.StatusReply(opcode=5))
@@ -210,3 +217,43 @@ def test_stall_detector():
     assert stalled_at is not None and 1.0 + 0.45 <= stalled_at <= 1.0 + 0.6
     s.reset()
     assert not s.update(t + 0.05, c)
+
+
+@pytest.mark.parametrize(
+    ("lose", "writes"),
+    [({p.LsWrite: 1}, 2), ({p.LsRead: 1}, 2), ({p.LsWrite: 2, p.LsRead: 3}, 6)],
+)
+def test_lost_reply_redoes_the_whole_register_read(lose, writes):
+    """LSWRITE and LSREAD are unsafe to repeat on their own, but a register read is a
+    transaction that can be redone from the start (write, poll, read)."""
+    brick = I2CBrick({0x42: 87}, lose=lose)
+    c, clock = client_for(brick)
+    assert Ultrasonic(c, 3, clock).distance_cm() == 87
+    assert sum(isinstance(cmd, p.LsWrite) for cmd in brick.log) == writes
+    events = [e for e in c.drain_faults() if e.get("sensor") == "ultrasonic sensor"]
+    assert len(events) == 1 and events[0]["recovered"] and events[0]["attempts"] == writes
+
+
+def test_lost_reply_redoes_a_register_write():
+    brick = I2CBrick({}, sensor_type=0x0A, lose={p.LsWrite: 1})
+    c, clock = client_for(brick)
+    HiTechnicCompass(c, 2, clock).setup()
+    assert brick.regs[0x41] == 0x00
+    assert sum(isinstance(cmd, p.LsWrite) for cmd in brick.log) == 2
+
+
+def test_register_read_gives_up_when_the_brick_falls_silent():
+    brick = I2CBrick({0x42: 87}, lose={p.LsWrite: 1, p.KeepAlive: 10**6, p.LsGetStatus: 10**6})
+    c, clock = client_for(brick)
+    with pytest.raises(p.ReplyTimeoutError, match="ultrasonic sensor on sensor port 4"):
+        Ultrasonic(c, 3, clock).distance_cm()
+    assert sum(isinstance(cmd, p.LsWrite) for cmd in brick.log) <= 1 + c.retries
+
+
+def test_transaction_stuck_pending_is_redone_from_the_start():
+    """A transfer still pending after ``pending_timeout_s`` (the mode is intact) is a failed
+    attempt of a transaction that can be redone, not the end of the capture."""
+    brick = I2CBrick({0x42: 87}, pending=80)  # > pending_timeout_s of 5 ms polls
+    c, clock = client_for(brick)
+    assert Ultrasonic(c, 3, clock).distance_cm() == 87
+    assert sum(isinstance(cmd, p.LsWrite) for cmd in brick.log) == 2

@@ -58,3 +58,45 @@ def test_random_exploration_through_nxt_emulator(tmp_path):
         err = p["compass_deg"] - np.degrees(t["theta"]) + cfg.sim.sensors.compass_offset_deg
         err = (err + 180.0) % 360.0 - 180.0
         assert abs(err) < 4.0 * cfg.sim.sensors.compass_noise_deg + 1.0
+
+
+@pytest.mark.slow
+def test_reboot_right_after_the_third_photo(tmp_path):
+    """Issue 24, case 2: the brick reboots right after the 3rd camera trigger. The turn that
+    follows must detect it before reading the wheel counters: every odometry step of the
+    circle stays the commanded step, the robot really turns, and the log records the fault."""
+    cfg = validate_config(
+        {"sim": {"camera": {"width": 160, "height": 120}}, "exploration": {"photos": 6}}
+    )
+    out = tmp_path / "round_000" / "capture"
+    (out / "images").mkdir(parents=True)
+    robot, camera, _world = make_nxt_backend(
+        cfg, NxtConfig(), emulated=True, inbox=out / "inbox",
+        emulator=EmulatorConfig(time_scale=2.0),
+    )  # fmt: skip
+    emu = robot.emulator
+    trigger = camera.trigger
+
+    def trigger_then_reboot():
+        trigger()
+        if camera.captured == 2:  # the 3rd trigger (captured counts finished photos)
+            emu.cfg.faults.reboot_at.append(emu.command_count)
+
+    camera.trigger = trigger_then_reboot
+    with CaptureLog(out / "log.jsonl") as log, robot:
+        taker = PhotoTaker(robot, camera, log, out, "r000")
+        result = random_exploration(
+            robot, taker, log, cfg.exploration, np.random.default_rng([cfg.seed, 0])
+        )
+    assert result.photos == 6 and emu.reboots == 1
+    assert not emu.motors_running()
+    records = list(read_log(out / "log.jsonl"))
+    faults = [r for r in records if r["type"] == "fault"]
+    assert [f["fault"] for f in faults] == ["brick_reboot"] and faults[0]["during"] == "turn"
+    photos = [r for r in records if r["type"] == "photo"]
+    step = np.radians(cfg.exploration.circle_step_deg)
+    odo = np.unwrap([p["odometry"]["theta"] for p in photos])
+    true = np.unwrap([p["truth"]["robot"]["theta"] for p in photos])
+    assert np.allclose(np.diff(odo), step, atol=np.radians(0.5))  # was 10.2, 10.1, -20.3, ...
+    assert np.all(np.diff(true) > 0.5 * step)  # the turn after the reboot happened
+    assert len({(out / p["image"]).read_bytes() for p in photos}) == 6

@@ -263,3 +263,149 @@ def test_bring_your_own_photos_make_round_0(workdir):
     assert report["registered"] >= 0.8 * report["photos"]
     assert not (workdir / "results/office/round_000/capture").exists()  # no robot ran
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before  # photos untouched
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
+def test_bring_your_own_photos_build_the_final_targets(workdir):
+    """robot: photos through `rule all`: every stage after sfm receives only its own config
+    sections and must still accept them (the photo folder is the sfm stage's business), up to
+    the dense model and the tour. Small settings keep it cheap."""
+    folder = workdir / "my photos"  # a space in the path, as users have
+    folder.mkdir()
+    for p in sorted((CANNED / "images").glob("*.jpg")):
+        shutil.copy(p, folder / p.name)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    cfg = dict(SMALL, robot="photos", photos={"folder": str(folder)})
+    cfg["sfm"] = {"peak_threshold": 0.002, "exhaustive_max_images": 60}  # no odometry: all pairs
+    cfg["score"] = {"n_candidates": 100}
+    cfg["goals"] = {"k": 2}
+    cfg["dense"] = {"max_image_size": 160, "plane_fill": {"enabled": False}}
+    cfg["tour"] = {"width": 96, "height": 72, "eval_holdout": 0, "path": {"frames": 8}}
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
+    res = snakemake(workdir)
+    assert res.returncode == 0, why(res, workdir)
+    results = workdir / "results/office"
+    assert (results / "final/dense/fused.ply").stat().st_size > 1000
+    assert (results / "final/tour/index.html").is_file()
+    campaign = json.loads((results / "campaign.json").read_text())
+    assert [r["round"] for r in campaign["rounds"]] == [0]  # a folder is one round
+    assert not (results / "round_000/capture").exists()  # no robot ran
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before  # photos untouched
+    assert snakemake(workdir, "-n").stdout.count("Nothing to be done") == 1
+
+
+def _rule_inputs(dry_run: str, rule: str) -> list[str]:
+    """The inputs of ``rule`` as a dry run lists them."""
+    block = dry_run.split(f"rule {rule}:", 1)[1]
+    line = next(x for x in block.splitlines() if x.strip().startswith("input:"))
+    return [f.strip() for f in line.split("input:", 1)[1].split(",")]
+
+
+def test_the_sfm_rule_and_the_photo_reader_agree_on_which_files_are_photos(workdir):
+    """One definition of a photo file (suffixes in any case, PNG too, no hidden files), for
+    the sfm rule's inputs and the sfm stage's reader; a duplicate is an input but left out
+    of the map by the reader (with a warning). A dry run: nothing is computed."""
+    from scenebot.sfm.photofiles import photo_files
+    from scenebot.sfm.photos import photos_from_folder
+
+    folder = workdir / "my_photos"
+    folder.mkdir()
+    canned = sorted((CANNED / "images").glob("*.jpg"))
+    names = ["0001.jpg", "0002.JPG", "0007.Jpg", "0010.jpeg"]
+    for src, name in zip(canned, names, strict=False):
+        shutil.copy(src, folder / name)
+    from PIL import Image
+
+    with Image.open(canned[5]) as im:
+        im.save(folder / "0008.PNG", "PNG")
+    shutil.copy(canned[0], folder / "0011.jpg")  # the same photo twice
+    (folder / "._0003.jpg").write_bytes(b"\x00\x05\x16\x07")  # macOS metadata, not a photo
+    (folder / "notes.txt").write_text("not a photo")
+    cfg = dict(SMALL, robot="photos", photos={"folder": str(folder)})
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
+    res = snakemake(workdir, "-n", "results/office/round_000/sfm/map.png")
+    assert res.returncode == 0, why(res, workdir)
+    inputs = {Path(f).name for f in _rule_inputs(res.stdout, "sfm") if str(folder) in f}
+    expected = ["0001.jpg", "0002.JPG", "0007.Jpg", "0008.PNG", "0010.jpeg", "0011.jpg"]
+    assert [p.name for p in photo_files(folder)] == expected
+    assert inputs == set(expected)
+    _, photos = photos_from_folder(folder)
+    assert [p.name for p in photos] == [n for n in expected if n != "0011.jpg"]
+
+
+def _capture_params(workdir: Path, cfg: dict) -> dict:
+    """The config sections the round-0 capture would receive (a dry run's shell command)."""
+    import shlex
+
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
+    res = snakemake(workdir, "-n", "-p", "--forcerun", "capture_round0", CAPTURE[0])
+    assert res.returncode == 0, why(res, workdir)
+    line = next(x for x in res.stdout.splitlines() if "-m scenebot capture" in x)
+    words = shlex.split(line.split("2>", 1)[0])
+    return json.loads(words[words.index("--params") + 1])
+
+
+def test_a_capture_receives_only_the_settings_of_its_robot(workdir):
+    """Changing an nxt: or nxt_emulator: setting while robot: sim must not re-take round 0
+    (and so every round): those sections are not the capture's params."""
+    sim = _capture_params(workdir, SMALL)
+    assert set(sim) == {"scene", "robot", "seed", "world", "sim", "exploration"}
+    changed = dict(SMALL, nxt={"port": "/dev/rfcomm7"}, nxt_emulator={"time_scale": 2.0})
+    assert _capture_params(workdir, changed) == sim
+    emulated = _capture_params(workdir, dict(changed, robot="nxt-emulated"))
+    assert {"nxt", "nxt_emulator", "world", "sim"} <= set(emulated)
+    assert emulated["nxt"]["port"] == "/dev/rfcomm7"
+
+
+def test_a_quoted_number_and_nested_config_values_run(workdir):
+    """`exploration.photos: "12"` in the YAML and `--config 'exploration={photos: 12}'`
+    (Snakemake passes nested values as text) start the workflow, as check-config says."""
+    text = (workdir / "config.yaml").read_text().replace("photos: 12", 'photos: "12"')
+    (workdir / "config.yaml").write_text(text)
+    res = snakemake(workdir, "-n", CAPTURE[0])
+    assert res.returncode == 0, why(res, workdir)
+    nested = snakemake(
+        workdir, "-n", CAPTURE[0], "--config", "exploration={photos: 9, drive_max_m: 1.2}",
+        "sim={camera: {width: 160, height: 120, antialias: false}}",
+    )  # fmt: skip
+    assert nested.returncode == 0, why(nested, workdir)
+    bad = snakemake(workdir, "-n", CAPTURE[0], "--config", "exploration={photos: many}")
+    assert bad.returncode != 0
+    out = bad.stdout + bad.stderr
+    assert "exploration.photos: got 'many'; expected a whole number, e.g. 100" in out
+    assert "Traceback" not in out and "Failed validating" not in out
+
+
+def test_a_target_read_as_a_config_file_is_named(workdir):
+    """Snakemake reads every word after `--configfile` as a config file: a target placed
+    there is named as what it is (when Snakemake could read it at all)."""
+    (workdir / "my.yaml").write_text(yaml.safe_dump(SMALL))
+    report = workdir / "results/office/round_000/sfm/report.json"
+    report.parent.mkdir(parents=True)
+    report.write_text(json.dumps({"photos": 3, "registered": 3}))
+    target = "results/office/round_000/sfm/report.json"
+    res = snakemake(workdir, "-n", "--configfile", "my.yaml", target)
+    assert res.returncode != 0
+    out = res.stdout + res.stderr
+    assert f"--configfile got {target}, which is not a config file" in out, out[-2000:]
+    assert "targets first" in out
+    for args in (("-n", CAPTURE[0], "--configfile", "my.yaml"),
+                 ("-n", "--configfile=my.yaml", CAPTURE[0])):  # fmt: skip
+        ok = snakemake(workdir, *args)
+        assert ok.returncode == 0, why(ok, workdir)
+
+
+def test_the_readme_gives_config_files_in_an_order_that_works():
+    """`--configfile my.yaml <target>` reads the target as a config file."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    for line in readme.splitlines():
+        m = re.search(r"--configfile\s+(\S+)\s+(\S+)", line)
+        assert m is None or m.group(2).startswith(("-", "`")), line
+    assert "--configfile=my.yaml" in readme
+
+
+def test_the_readme_says_what_a_killed_host_leaves_running():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    robots = readme.split("## Robots", 1)[1].split("\n## ", 1)[0]
+    assert "SIGKILL" in robots and "tacho limit" in robots

@@ -41,7 +41,8 @@ def load_settings(args) -> tuple[object, EvaluateConfig]:
             )
         data, source = yaml.safe_load(path.read_text()) or {}, str(path)
     ev = data.pop("evaluate", None) or {}
-    cfg = validate_config(data, source)
+    # stage parameters hold only the stage's sections: checks across others do not apply
+    cfg = validate_config(data, source, sections=data if source == "stage parameters" else None)
     got = getattr(cfg, "evaluate", None)  # once the lead merges the section into Config
     ecfg = got if isinstance(got, EvaluateConfig) and not ev else EvaluateConfig(**ev)
     return cfg, ecfg

@@ -12,6 +12,7 @@ import math
 from collections import deque
 from pathlib import Path
 
+from scenebot.jpeg import store_photo
 from scenebot.robot.base import (
     Camera,
     Health,
@@ -136,8 +137,11 @@ class SimCamera(Camera):
         self.world = world
 
     def capture(self, dest: Path, timeout_s: float = 30.0) -> Path:
+        """Render the photo and store it at ``dest`` (atomically, verified, never over an
+        existing file: :func:`scenebot.jpeg.store_photo`, which raises
+        :class:`~scenebot.jpeg.PhotoWriteError`)."""
         dest = Path(dest)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        self.world.render_jpeg(dest)
+        store_photo(dest, self.world.render_jpeg)
         self.world.step(self.world.cfg.photo_time_s)
         return dest

@@ -1,12 +1,15 @@
 """The photo set of an sfm run: photos of capture rounds or a bring-your-own folder.
 
 Photos are only read, never modified, moved or deleted. Every photo is checked before
-SfM touches it (a corrupt or truncated JPEG stops the run with a message naming it), and
-its focal length is read from EXIF (see :func:`scenebot.jpeg.read_exif_focal`).
+SfM touches it (an empty, corrupt or truncated file, or one that is not an 8-bit JPEG or PNG,
+stops the run with a message naming it), and its focal length is read from EXIF (see
+:func:`scenebot.jpeg.read_exif_focal`). Which files of a folder are photos, and their
+order, is defined once in :mod:`scenebot.sfm.photofiles` (the workflow uses it too).
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,10 +18,14 @@ from PIL import Image, UnidentifiedImageError
 
 from scenebot.capturelog import photo_records
 from scenebot.jpeg import read_exif_focal
+from scenebot.sfm.photofiles import other_files, photo_files
 
 log = logging.getLogger(__name__)
 
-JPEG_SUFFIXES = {".jpg", ".jpeg", ".JPG", ".JPEG"}
+PHOTO_FORMATS = ("JPEG", "PNG")
+"""Image formats SfM reads (PIL's names; by content, whatever the suffix)."""
+DEEP_MODES = ("I", "I;16", "I;16B", "I;16L", "I;16N", "F")
+"""PIL modes of 16-bit and float images: COLMAP finds no features in them."""
 
 
 class PhotoError(ValueError):
@@ -59,26 +66,38 @@ class Photo:
 
 
 def inspect_photo(photo: Photo) -> None:
-    """Decode ``photo`` completely (catches corrupt and truncated JPEGs) and read its EXIF.
+    """Decode ``photo`` completely (catches corrupt and truncated files) and read its EXIF.
 
     Fills ``width``, ``height``, ``focal_px``, ``focal_source``. The file is opened read-only.
 
     Raises:
-        PhotoError: the file is missing, not a JPEG, corrupt or truncated.
+        PhotoError: the file is missing, empty, not a JPEG or PNG, 16-bit, corrupt or
+            truncated; the message starts with its path.
     """
     if not photo.path.is_file():
         raise PhotoError(f"photo {photo.path} is missing")
+    if photo.path.stat().st_size == 0:
+        raise PhotoError(f"{photo.path}: empty file (0 bytes)")
     try:
         with Image.open(photo.path) as img:
             img.verify()
         with Image.open(photo.path) as img:
             img.load()  # a truncated file raises here ("image file is truncated")
-            if img.format != "JPEG":
-                raise PhotoError(f"{photo.path} is a {img.format} file, not a JPEG")
+            fmt, mode = img.format, img.mode
             photo.width, photo.height = img.size
             photo.focal_px, photo.focal_source = read_exif_focal(img)
-    except (OSError, UnidentifiedImageError, SyntaxError) as exc:
-        raise PhotoError(f"{photo.path}: corrupt or truncated JPEG ({exc})") from exc
+    except (OSError, UnidentifiedImageError, SyntaxError, ValueError) as exc:
+        raise PhotoError(f"{photo.path}: not an image, or corrupt or truncated ({exc})") from exc
+    if fmt not in PHOTO_FORMATS:
+        raise PhotoError(
+            f"{photo.path}: a {fmt} file; photos must be JPEG or PNG (convert it, or move it "
+            "out of the folder)"
+        )
+    if mode in DEEP_MODES:
+        raise PhotoError(
+            f"{photo.path}: a {fmt} of 16 bits or floats per pixel (mode {mode}), which "
+            "structure from motion cannot read; save it with 8 bits per channel"
+        )
 
 
 def check_photos(photos: list[Photo], fallback_focal_factor: float) -> None:
@@ -186,13 +205,48 @@ def photos_from_captures(capture_dirs: list[Path]) -> tuple[Path, list[Photo]]:
 
 
 def photos_from_folder(folder: Path) -> tuple[Path, list[Photo]]:
-    """Bring-your-own photos: every JPEG of ``folder`` (not recursive), sorted by name.
+    """Bring-your-own photos: every photo file of ``folder`` (not recursive; see
+    :mod:`scenebot.sfm.photofiles` for which files are photos and their order).
 
-    No odometry, no compass; the order of file names is taken as capture order.
+    No odometry, no compass; the order of file names is taken as capture order. Other files
+    are ignored (logged by name). A photo with the same bytes as an earlier one is left out
+    (logged, naming both): the same view twice adds nothing to a map. Photos are only read.
+
+    Raises:
+        PhotoError: the folder does not exist.
     """
     folder = Path(folder)
     if not folder.is_dir():
         raise PhotoError(f"photo folder {folder} does not exist (robot: photos)")
-    files = sorted(p for p in folder.iterdir() if p.suffix in JPEG_SUFFIXES and p.is_file())
+    ignored = other_files(folder)
+    if ignored:
+        log.info(
+            "%d file(s) of %s are not photos (.jpg, .jpeg or .png in any case) and are ignored: %s",
+            len(ignored),
+            folder,
+            ", ".join(p.name for p in ignored[:20]) + (" ..." if len(ignored) > 20 else ""),
+        )
+    files: list[Path] = []
+    first_of: dict[str, str] = {}
+    for p in photo_files(folder):
+        digest = _sha256(p) if p.stat().st_size > 0 else None  # empty files: check_photos
+        if digest is not None and digest in first_of:
+            log.warning(
+                "%s has the same bytes as %s (the same photo twice): left out of the map",
+                p.name,
+                first_of[digest],
+            )
+            continue
+        if digest is not None:
+            first_of[digest] = p.name
+        files.append(p)
     photos = [Photo(name=p.name, path=p.resolve(), round=0, index=i) for i, p in enumerate(files)]
     return folder.resolve(), photos
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

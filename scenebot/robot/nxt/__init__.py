@@ -11,6 +11,7 @@ Entry points for the lead:
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING
 
 from scenebot.robot.nxt.config import EmulatorConfig, FaultConfig, NxtCameraConfig, NxtConfig
@@ -131,6 +132,7 @@ def make_nxt_robot(
         try:
             robot = NxtRobot(client, cfg, clock, watchdog=watchdog)
             camera = NxtCamera(client, cfg.camera, clock)
+            camera.before_trigger = functools.partial(robot.check_brick, "photo")
         except BaseException:
             client.close()
             raise

@@ -78,7 +78,7 @@ def serve_emulator(
     emu_cfg = (emulator or EmulatorConfig()).model_copy(update={"inbox": folder})
     p = world.params
     print_fn(
-        "robot geometry for robot.nxt: "
+        "robot geometry for nxt: "
         f"wheel_radius_m={p.wheel_radius_m}, wheel_base_m={p.wheel_base_m}, "
         f"max_wheel_speed_deg_s={p.max_wheel_speed_deg_s}, camera.inbox={folder}"
     )

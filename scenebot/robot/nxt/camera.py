@@ -4,9 +4,12 @@ Wi-Fi SD card into an inbox folder.
 ``capture`` records the inbox contents, powers the camera port for ``pulse_s`` (switched off
 again on every path), then waits for the first *new* ``.jpg`` whose size stayed the same for
 ``stable_polls`` polls, that starts with ``FF D8``, ends with ``FF D9`` and decodes, and moves
-it atomically to the requested destination. Files already in the inbox before the trigger
-are never taken (a late photo of an earlier, timed-out capture cannot be mistaken for this
-one if it was there at trigger time).
+it atomically to the requested destination, never over an existing photo (:func:`move_atomic`;
+a failed move raises :class:`~scenebot.jpeg.PhotoWriteError`). Files already in the inbox
+before the trigger are never taken (a late photo of an earlier, timed-out capture cannot be
+mistaken for this one if it was there at trigger time). Before the trigger, ``before_trigger``
+runs (the robot's brick check: a reboot is found and recovered from before the photo, not
+after it).
 """
 
 from __future__ import annotations
@@ -15,12 +18,14 @@ import errno
 import logging
 import os
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from scenebot.jpeg import PhotoWriteError, publish, space_left, store_photo
 from scenebot.robot.base import Camera, CameraError
 from scenebot.robot.nxt.client import Clock, NxtClient, SystemClock
 from scenebot.robot.nxt.config import NxtCameraConfig, motor_index
@@ -47,24 +52,39 @@ def is_complete_jpeg(data: bytes) -> bool:
 
 
 def move_atomic(src: Path, dest: Path) -> None:
-    """Move ``src`` to ``dest`` so ``dest`` appears complete or not at all.
+    """Move the photo ``src`` to ``dest`` so ``dest`` appears complete or not at all, and
+    never in place of an existing file.
 
-    Same file system: one ``rename``. Across file systems: copy to a temporary name next to
-    ``dest``, fsync, rename, then delete ``src``.
+    Same file system: ``src`` is fsynced and hard-linked as ``dest`` (fails if ``dest``
+    exists), then its inbox name goes. Across file systems: copied to a temporary name next
+    to ``dest``, fsynced, verified to decode, published the same way, then ``src`` goes.
+
+    Raises:
+        PhotoWriteError: ``dest`` exists, or the copy failed (disk full: the message says how
+            much space is left); ``src`` stays in the inbox.
     """
+    src, dest = Path(src), Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
+    if os.path.lexists(dest):
+        raise PhotoWriteError(f"photo {dest} already exists: refusing to overwrite it")
     try:
-        os.replace(src, dest)
+        with open(src, "rb") as fh:
+            os.fsync(fh.fileno())  # the uploader's data is on disk before it is a photo
+        publish(src, dest)
         return
+    except FileExistsError:
+        raise PhotoWriteError(f"photo {dest} already exists: refusing to overwrite it") from None
     except OSError as exc:
         if exc.errno != errno.EXDEV:
-            raise
-    tmp = dest.with_name(f".{dest.name}.part")
-    with open(src, "rb") as fi, open(tmp, "wb") as fo:
-        shutil.copyfileobj(fi, fo)
-        fo.flush()
-        os.fsync(fo.fileno())
-    os.replace(tmp, dest)
+            raise PhotoWriteError(
+                f"could not move photo {src} to {dest}: {exc.strerror or exc} ({space_left(dest)})"
+            ) from None
+
+    def copy(tmp: Path) -> None:
+        with open(src, "rb") as fi, open(tmp, "xb") as fo:
+            shutil.copyfileobj(fi, fo)
+
+    store_photo(dest, copy)
     os.unlink(src)
 
 
@@ -90,12 +110,13 @@ class NxtCamera(Camera):
         self.inbox = Path(cfg.inbox)
         self._check_inbox()
         self.captured = 0
+        self.before_trigger: Callable[[], None] | None = None  # e.g. NxtRobot.check_brick
 
     def _check_inbox(self) -> None:
         if not self.inbox.is_dir():
             raise CameraError(
                 f"camera inbox folder {self.inbox} does not exist: create it and set the Wi-Fi "
-                "SD card (or the emulator) to upload there, or fix robot.nxt.camera.inbox"
+                "SD card (or the emulator) to upload there, or fix nxt.camera.inbox"
             )
 
     def _jpegs(self) -> dict[str, os.stat_result]:
@@ -143,7 +164,15 @@ class NxtCamera(Camera):
             raise CameraError(f"{dest} already exists: refusing to overwrite a photo")
         before = set(self._jpegs())
         t0 = self.clock.monotonic()
-        self.trigger()
+        try:
+            if self.before_trigger is not None:
+                self.before_trigger()
+            self.trigger()
+        except ProtocolError as exc:
+            raise CameraError(
+                f"could not trigger the camera on motor port {self.cfg.port} ({exc}): check the "
+                "Bluetooth link and the brick's batteries"
+            ) from exc
         seen: dict[str, _Seen] = {}
         rejected: set[str] = set()
         while True:

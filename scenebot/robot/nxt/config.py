@@ -116,13 +116,13 @@ class NxtConfig(BaseModel):
         motors = [self.left_motor, self.right_motor, self.camera.port]
         if len(set(motors)) != 3:
             raise ValueError(
-                f"robot.nxt: left_motor, right_motor and camera.port must be different motor "
+                f"nxt: left_motor, right_motor and camera.port must be different motor "
                 f"ports, got {motors}"
             )
         sensors = [self.bumper_front, self.bumper_rear, self.compass, self.ultrasonic]
         if len(set(sensors)) != 4:
             raise ValueError(
-                f"robot.nxt: bumper_front, bumper_rear, compass and ultrasonic must be "
+                f"nxt: bumper_front, bumper_rear, compass and ultrasonic must be "
                 f"different sensor ports 1-4, got {sensors}"
             )
         return self

@@ -203,7 +203,7 @@ class NxtEmulator:
         if not self.inbox.is_dir():
             raise FileNotFoundError(
                 f"emulator inbox folder {self.inbox} does not exist: create it (it plays the "
-                "Wi-Fi SD card's upload folder, robot.nxt.camera.inbox)"
+                "Wi-Fi SD card's upload folder, nxt.camera.inbox)"
             )
         w = self.wiring
         self.left_port = motor_index(w.left_motor)
@@ -407,8 +407,8 @@ class NxtEmulator:
         while self.world.t + dt <= target + 1e-9 and steps < 200:
             self._physics_step(dt)
             steps += 1
-        if steps == 200:  # fell behind (slow render): do not try to catch up forever
-            self._sim0 += target - self.world.t
+        if steps == 200:  # fell behind (slow render): drop the backlog, do not race it
+            self._sim0 -= target - self.world.t
         self._camera_check()
 
     def _physics_step(self, dt: float) -> None:
@@ -694,7 +694,7 @@ def serve(
 ) -> None:
     """Run the emulator until ``stop`` is set or Ctrl-C / SIGTERM; print the port path.
 
-    This is the body of ``scenebot nxt-emulator``: point ``robot.nxt.port`` at the printed
+    This is the body of ``scenebot nxt-emulator``: point ``nxt.port`` at the printed
     path and run the campaign with ``robot: nxt`` (the real-hardware backend).
     """
     from scenebot.robot.nxt.robot import install_sigterm_handler

@@ -120,7 +120,15 @@ class MalformedCommandError(ProtocolError):
 
 
 class ReplyTimeoutError(ProtocolError):
-    """No complete reply arrived within the read timeout."""
+    """No complete reply arrived within the read timeout.
+
+    Attributes:
+        brick_answered: the brick answered a KEEPALIVE barrier after the lost reply (the link
+            is alive and only this reply was lost), so a caller that can redo the whole
+            transaction (an I2C register read) may do so.
+    """
+
+    brick_answered: bool = False
 
 
 class DirectCommandError(ProtocolError):

@@ -2,21 +2,30 @@
 
 Motions start both wheel motors with a tacho limit and then poll the brick (motor state,
 bumpers) until the firmware reports the limit reached, a bumper closes, a wheel stalls (its
-rotation count stops advancing although powered), or the motion times out. Every poll is a
-heartbeat for the host-side watchdog thread, which stops the motors if the control loop goes
-silent while they run (motors keep running on the brick when the host stops talking).
+rotation count stops advancing although powered), or the motion times out. Every command that
+powers a wheel carries a tacho limit (:func:`run_command` refuses none), so a host that dies
+mid-motion (SIGKILL) leaves the wheels running at most to that limit: that is the worst case.
+Every poll, and every request or reply on the link, is a heartbeat for the host-side watchdog
+thread, which stops the motors if the control loop goes silent while they run (motors keep
+running on the brick when the host stops talking); a control loop waiting on a slow link is
+not silent.
 
 Safety: the motors and the camera port are switched off by :meth:`NxtRobot.close`, which runs
 from ``with`` blocks, ``atexit`` and (through :func:`install_sigterm_handler`) SIGTERM; after
-a reconnect the motors are stopped first (they keep running through a link drop). A brick
-reboot (sensor modes lost, tacho counters reset) is detected from the bumper port type on every
-poll; the sensors are set up again and odometry continues from the last good pose.
+a reconnect the motors are stopped first (they keep running through a link drop).
+
+A brick reboot (sensor modes lost, tacho counters reset) is detected from the bumper port type,
+which is always read *after* the wheel counters it vouches for: at the start and end of every
+motion, before every photo trigger (:meth:`NxtRobot.check_brick`), on every poll and in every
+sensor reading. The sensors are then set up again and odometry is rebaselined on the reset
+counters, so it continues from the last good pose; reset counters never enter odometry. Each
+recovered fault (reboot, lost reply, link drop, watchdog stop, resent start) is reported as a
+``fault`` event that :meth:`NxtRobot.drain_faults` hands to the capture log.
 """
 
 from __future__ import annotations
 
 import atexit
-import contextlib
 import logging
 import math
 import signal
@@ -63,6 +72,12 @@ log = logging.getLogger(__name__)
 LIMIT_TOLERANCE_DEG = 12
 """A motion whose wheels stopped within this many degrees of the tacho limit completed."""
 
+PAIR_SKEW_MAX_S = 0.05
+"""Mid-motion, the two wheel counters (read one after the other) enter odometry only if both
+reads took at most this long (s). A pair read across a lost reply is skewed in time: during a
+turn in place it looks like a translation. The counters after the stop are always used, so
+the skipped increment enters odometry there, as one segment (exact for a turn or a straight)."""
+
 
 def brake_command(port: int) -> SetOutputState:
     """Active brake: power 0, regulated, running (holds the wheel); safe to repeat."""
@@ -91,7 +106,16 @@ def off_command(port: int) -> SetOutputState:
 
 
 def run_command(port: int, power: int, limit_deg: int) -> SetOutputState:
-    """Speed-regulated run for ``limit_deg`` degrees (then the firmware brakes)."""
+    """Speed-regulated run for ``limit_deg`` degrees (then the firmware brakes).
+
+    Raises:
+        ValueError: ``limit_deg`` is not positive (a wheel never runs without a tacho limit).
+    """
+    if limit_deg <= 0:
+        raise ValueError(
+            f"motor port {port}: a wheel motion needs a tacho limit > 0 deg, got {limit_deg} "
+            "(without one the wheel would run on if the host died)"
+        )
     return SetOutputState(
         port=port,
         power=power,
@@ -155,6 +179,8 @@ class NxtRobot(Robot):
         self.emulator = None
 
         self.client.on_reconnect.append(self._after_reconnect)
+        self.client.on_activity.append(self._link_activity)
+        self._wd_thread: threading.Thread | None = None
         self.all_off()  # whatever a previous run left on
         self.check_battery(force=True)
         self.setup_sensors()
@@ -163,14 +189,13 @@ class NxtRobot(Robot):
         except (BusError, ChannelBusyError, SensorReadError) as exc:
             raise RobotError(
                 f"the compass on sensor port {self.compass.port + 1} does not answer ({exc}): "
-                "check that a HiTechnic compass is plugged in there (robot.nxt.compass)"
+                "check that a HiTechnic compass is plugged in there (nxt.compass)"
             ) from exc
         self.odometry = Odometry(cfg.wheel_radius_m, cfg.wheel_base_m, Pose2D(0.0, 0.0, 0.0))
         self.odometry.pose = Pose2D(0.0, 0.0, math.radians(heading))
         self.odometry.rebaseline(*self._wheel_counts())
 
         self._wd_stop = threading.Event()
-        self._wd_thread: threading.Thread | None = None
         if watchdog:
             self._wd_thread = threading.Thread(
                 target=self._watchdog_loop, name="nxt-watchdog", daemon=True
@@ -199,7 +224,7 @@ class NxtRobot(Robot):
             except (BusError, ChannelBusyError, SensorReadError) as exc:
                 raise RobotError(
                     f"the {sensor.name} on sensor port {sensor.port + 1} does not answer "
-                    f"({exc}): check its cable and robot.nxt.{key}"
+                    f"({exc}): check its cable and nxt.{key}"
                 ) from exc
 
     def check_battery(self, force: bool = False) -> int | None:
@@ -246,13 +271,57 @@ class NxtRobot(Robot):
         sr = self.client.output_state(self.right.port)
         return self.left.sign * sl.rotation_count, self.right.sign * sr.rotation_count
 
-    def _recover_reboot(self, cause: Exception) -> None:
-        """The brick rebooted: set the sensors up again; odometry continues from here."""
+    def _recover_reboot(self, cause: Exception, during: str) -> tuple[float, float]:
+        """The brick rebooted: set the sensors up again and rebaseline odometry on the reset
+        counters (it continues from the last good pose); return those counters.
+
+        Args:
+            cause: how the reboot showed.
+            during: the step that found it (``turn``, ``drive``, ``photo``, ``sense``).
+        """
         self.reboots += 1
-        log.warning("NXT brick rebooted (%s): setting sensor modes again", cause)
+        log.warning("NXT brick rebooted (%s, found at a %s): setting sensor modes again",
+                    cause, during)  # fmt: skip
         self.stop()
         self.setup_sensors()
-        self.odometry.rebaseline(*self._wheel_counts())
+        counts = self._wheel_counts()
+        self.odometry.rebaseline(*counts)
+        self.client.record_fault(
+            "brick_reboot",
+            recovered=True,
+            during=during,
+            action="sensor modes set again; odometry rebaselined on the reset wheel counters",
+            odometry=self.odometry.pose.as_dict(),
+            detail=str(cause),
+        )
+        return counts
+
+    def _sync(self, during: str) -> tuple[float, float]:
+        """Bring odometry up to date, checking for a brick reboot before the counters are used.
+
+        The bumper's port type is read after the wheel counters: if the brick rebooted before
+        the counter read, the type shows it, and the (reset) counters are taken as the new
+        baseline instead of as motion. Returns the counters odometry now stands on.
+        """
+        counts = self._wheel_counts()
+        try:
+            self.front.pressed()
+        except SensorModeLost as exc:
+            return self._recover_reboot(exc, during)
+        self.odometry.update(*counts)
+        return counts
+
+    def check_brick(self, during: str = "photo") -> None:
+        """Check for a brick reboot (and recover from it) before a step that is not a motion,
+        e.g. a photo trigger; odometry is brought up to date on the way."""
+        with self.client.lock:
+            self._sync(during)
+
+    def drain_faults(self) -> list[dict]:
+        """The recovered faults since the last call, as ``{"type": "fault", ...}`` records
+        (``t`` on the robot clock, ``fault``: ``brick_reboot``, ``reply_lost``,
+        ``reply_garbled``, ``link_lost``, ``watchdog_stop`` or ``motor_start_resent``)."""
+        return self.client.drain_faults()
 
     def sense(self) -> SensorReading:
         for attempt in range(2):
@@ -275,7 +344,12 @@ class NxtRobot(Robot):
                         f"NXT sensors lose their modes repeatedly ({exc}): check the brick's "
                         "batteries and the sensor cables"
                     ) from exc
-                self._recover_reboot(exc)
+                self._recover_reboot(exc, "sense")
+            except ProtocolError as exc:  # retries and redone transactions did not help
+                raise RobotError(
+                    f"reading the NXT sensors failed ({exc}): check the Bluetooth link, the "
+                    "brick's batteries and the sensor cables"
+                ) from exc
         raise AssertionError("unreachable")
 
     # ------------------------------------------------------------------ motion
@@ -313,7 +387,9 @@ class NxtRobot(Robot):
         deg = abs(distance_m) / self.cfg.wheel_radius_m * 180.0 / math.pi
         s = 1 if distance_m >= 0 else -1
         bumper = ("front",) if s > 0 else ("rear",)
-        return self._motion(s * self.cfg.drive_power, s * self.cfg.drive_power, deg, bumper)
+        return self._motion(
+            s * self.cfg.drive_power, s * self.cfg.drive_power, deg, bumper, "drive"
+        )
 
     def turn(self, angle_rad: float) -> MotionResult:
         arc = abs(angle_rad) * 0.5 * self.cfg.wheel_base_m
@@ -322,7 +398,7 @@ class NxtRobot(Robot):
         p = self.cfg.turn_power
         # A round robot turning in place pushes into nothing: bumpers do not stop turns
         # (as in the simulator backend); a blocked wheel still shows as a stall.
-        return self._motion(-s * p, s * p, deg, ())
+        return self._motion(-s * p, s * p, deg, (), "turn")
 
     def _started(self, wheel: _Wheel, cmd: SetOutputState) -> bool:
         st = self.client.output_state(wheel.port)
@@ -348,6 +424,12 @@ class NxtRobot(Robot):
             if not self._started(w, cmd):
                 log.warning("motor port %d did not start; sending the command again", w.port)
                 self.client.request(cmd)
+                self.client.record_fault(
+                    "motor_start_resent",
+                    recovered=True,
+                    port=w.port,
+                    action="the start command was lost: sent again (with a reply)",
+                )
 
     def _motion(
         self,
@@ -355,6 +437,7 @@ class NxtRobot(Robot):
         power_r: int,
         limit_deg: float,
         bumpers: tuple[str, ...],
+        what: str,
     ) -> MotionResult:
         """Run both wheels to a tacho limit and watch bumpers, stalls and the brick.
 
@@ -362,17 +445,23 @@ class NxtRobot(Robot):
             power_l, power_r: signed motor power (%, forward positive).
             limit_deg: wheel rotation to do (deg, both wheels).
             bumpers: bumpers that stop this motion.
+            what: ``drive`` or ``turn`` (for the fault log).
         """
         limit = round(limit_deg)
         t0 = self.now
         if limit == 0:
             return MotionResult(MotionStatus.COMPLETED, duration_s=0.0)
-        self.check_battery()
         speed = self.cfg.max_wheel_speed_deg_s * max(abs(power_l), abs(power_r)) / 100.0
         timeout = self.cfg.motion_timeout_factor * limit / speed + 1.0
         pose0 = self.odometry.pose
-        counts0 = self._wheel_counts()
-        self.odometry.update(*counts0)
+        try:
+            self.check_battery()
+            counts0 = self._sync(what)  # a reboot since the last step: counters reset, modes lost
+        except ProtocolError as exc:
+            raise RobotError(
+                f"the NXT does not answer before a {what} ({exc}): check the Bluetooth link and "
+                "the brick's batteries"
+            ) from exc
         drops0 = self.link_drops
         stall = {
             w.port: StallDetector(self.cfg.stall_window_s, self.cfg.stall_min_deg)
@@ -389,16 +478,19 @@ class NxtRobot(Robot):
                 if self._watchdog_tripped:
                     status = MotionStatus.STALLED
                     break
+                t_read = self.now
                 sl = self.client.output_state(self.left.port)
                 sr = self.client.output_state(self.right.port)
+                skew = self.now - t_read
                 try:
                     pressed = {"front": self.front.pressed(), "rear": self.rear.pressed()}
                 except SensorModeLost as exc:
-                    self._recover_reboot(exc)
+                    self._recover_reboot(exc, what)
                     status = MotionStatus.LINK_LOST
                     break
                 counts = (self.left.sign * sl.rotation_count, self.right.sign * sr.rotation_count)
-                self.odometry.update(*counts)
+                if skew <= PAIR_SKEW_MAX_S:
+                    self.odometry.update(*counts)
                 if self.link_drops != drops0:
                     status = MotionStatus.LINK_LOST
                     break
@@ -430,8 +522,13 @@ class NxtRobot(Robot):
         finally:
             self._moving = False
             self.stop()
-        with contextlib.suppress(SensorModeLost):
-            self.odometry.update(*self._wheel_counts())
+        try:
+            self._sync(what)
+        except ProtocolError as exc:
+            raise RobotError(
+                f"the NXT stopped answering after a {what} ({exc}): check the Bluetooth link "
+                "and the brick's batteries"
+            ) from exc
         return self._result(status, which, pose0, t0)
 
     def _finished_status(
@@ -468,6 +565,11 @@ class NxtRobot(Robot):
     def _heartbeat(self) -> None:
         self._last_heartbeat = self.clock.monotonic()
 
+    def _link_activity(self) -> None:
+        """Client hook: the control loop is talking to the brick (or waiting on it)."""
+        if threading.current_thread() is not self._wd_thread:
+            self._heartbeat()
+
     def watchdog_check(self) -> bool:
         """One watchdog step: stop the motors if a motion's control loop has been silent
         longer than ``watchdog_timeout_s``; otherwise keep the brick awake. True if it fired."""
@@ -476,13 +578,28 @@ class NxtRobot(Robot):
         silent = self.clock.monotonic() - self._last_heartbeat
         if self._moving and silent > self.cfg.watchdog_timeout_s and not self._watchdog_tripped:
             if not self.client.lock.acquire(timeout=self.cfg.watchdog_timeout_s):
-                log.error("watchdog: the link is busy; motors may still be running")
+                log.warning(
+                    "watchdog: the control loop has waited on the link for %.1f s (the tacho "
+                    "limit bounds the motion)",
+                    silent,
+                )
                 return False
             try:
+                # the control loop may have been waiting on a slow link (holding the lock):
+                # only a loop still silent now that the link is free has hung
+                silent = self.clock.monotonic() - self._last_heartbeat
+                if not self._moving or silent <= self.cfg.watchdog_timeout_s:
+                    return False
                 log.error("watchdog: control loop silent for %.1f s, stopping the motors", silent)
                 self._watchdog_tripped = True
                 self.watchdog_trips += 1
                 self.stop()
+                self.client.record_fault(
+                    "watchdog_stop",
+                    recovered=True,
+                    silent_s=silent,
+                    action="motors stopped; the motion ends as stalled",
+                )
             finally:
                 self.client.lock.release()
             return True

@@ -7,6 +7,15 @@ answers 0xE0 (channel not configured or busy) for ~20 ms after SETINPUTMODE, and
 transaction is pending; both are waited out. A port that stays "not configured" reports a
 different sensor type in GETINPUTVALUES when the brick has rebooted: that raises
 :class:`SensorModeLost` so the robot can set the modes again.
+
+LSWRITE and LSREAD are unsafe to repeat on their own (one queues a transfer, the other
+consumes the receive buffer), so the client does not retry them; but the transactions these
+sensors use (read registers, write a mode register with the same value) can be redone from
+the start. A lost or garbled reply anywhere in one, or a transfer still pending after
+``pending_timeout_s`` on a port that kept its mode, redoes the whole transaction, under the
+client's :class:`~scenebot.robot.nxt.client.RetryBudget` (few attempts while the brick is
+silent, more while it answers and only replies are lost); each redone transaction is reported
+as a fault event.
 """
 
 from __future__ import annotations
@@ -16,15 +25,18 @@ from collections import deque
 from dataclasses import dataclass
 
 from scenebot.robot.base import Pose2D
-from scenebot.robot.nxt.client import Clock, NxtClient
+from scenebot.robot.nxt.client import Clock, NxtClient, RetryBudget
 from scenebot.robot.nxt.protocol import (
     BusError,
     ChannelBusyError,
+    FramingError,
     LsGetStatus,
     LsRead,
     LsWrite,
+    MalformedReplyError,
     PendingTransactionError,
     ProtocolError,
+    ReplyTimeoutError,
     SensorMode,
     SensorType,
     SetInputMode,
@@ -129,42 +141,81 @@ class I2CSensor:
                     raise
                 self.clock.sleep(self.poll_s)
 
+    def _attempt(self, tx: bytes, rx_len: int) -> bytes:
+        """One try of a transaction: LSWRITE, poll LSGETSTATUS, LSREAD."""
+        self._until_ready(
+            lambda: self.client.request(LsWrite(port=self.port, tx=tx, rx_len=rx_len))
+        )
+
+        # LSWRITE only queues the transfer: its outcome (e.g. a NACK = bus error)
+        # shows in LSGETSTATUS, for writes as for reads
+        def ready() -> int:
+            st = self.client.request(LsGetStatus(port=self.port))
+            if st.bytes_ready < rx_len:  # type: ignore[union-attr]
+                raise PendingTransactionError(int(LsGetStatus.OPCODE))
+            return st.bytes_ready  # type: ignore[union-attr]
+
+        self._until_ready(ready)
+        if rx_len == 0:
+            return b""
+        return self.client.request(LsRead(port=self.port)).data  # type: ignore[union-attr]
+
     def transaction(self, tx: bytes, rx_len: int) -> bytes:
         """One I2C write(+read) transaction; returns ``rx_len`` bytes.
+
+        The whole transaction is redone after a bus error (up to ``retries`` times) and after
+        a lost or garbled reply (under the client's retry budget; see the module doc).
 
         Raises:
             SensorModeLost: the port lost its mode (brick reboot).
             BusError: the bus kept failing after ``retries`` repeats.
+            ReplyTimeoutError: replies kept being lost, or the transfer stayed pending (names
+                the sensor and its port).
             SensorReadError: fewer bytes than asked for.
         """
-        last: Exception | None = None
-        for _ in range(self.retries + 1):
+        bus_errors = 0
+        budget = RetryBudget(self.client.retries)
+        while True:
             try:
-                self._until_ready(
-                    lambda: self.client.request(LsWrite(port=self.port, tx=tx, rx_len=rx_len))
-                )
-
-                # LSWRITE only queues the transfer: its outcome (e.g. a NACK = bus error)
-                # shows in LSGETSTATUS, for writes as for reads
-                def ready() -> int:
-                    st = self.client.request(LsGetStatus(port=self.port))
-                    if st.bytes_ready < rx_len:  # type: ignore[union-attr]
-                        raise PendingTransactionError(int(LsGetStatus.OPCODE))
-                    return st.bytes_ready  # type: ignore[union-attr]
-
-                self._until_ready(ready)
-                if rx_len == 0:
-                    return b""
-                data = self.client.request(LsRead(port=self.port)).data  # type: ignore[union-attr]
-            except BusError as exc:
-                last = exc
+                data = self._attempt(tx, rx_len)
+            except BusError:
+                bus_errors += 1
+                if bus_errors > self.retries:
+                    raise
+                continue
+            except (
+                ReplyTimeoutError,
+                MalformedReplyError,
+                FramingError,
+                ChannelBusyError,
+                PendingTransactionError,
+            ) as exc:
+                # a reply lost (the brick may or may not be there), garbled, or a transfer
+                # still pending/busy after pending_timeout_s with the mode intact (it answers)
+                answered = bool(getattr(exc, "brick_answered", True))
+                if not budget.spend(answered):
+                    err = ReplyTimeoutError(
+                        f"{self.name} on sensor port {self.port + 1}: no complete I2C "
+                        f"transaction after {budget.attempts} attempt(s) ({exc}); check the "
+                        "Bluetooth link, the brick's batteries and the sensor cable"
+                    )
+                    err.brick_answered = answered
+                    raise err from exc
                 continue
             if len(data) < rx_len:
                 raise SensorReadError(
                     f"{self.name}: LSREAD returned {len(data)} bytes, expected {rx_len}"
                 )
+            if budget.attempts:
+                self.client.record_fault(
+                    "reply_lost",
+                    recovered=True,
+                    sensor=self.name,
+                    port=self.port + 1,
+                    action="I2C transaction redone from the start",
+                    attempts=budget.attempts + 1,
+                )
             return data[:rx_len]
-        raise last  # type: ignore[misc]
 
     def write_register(self, reg: int, value: int) -> None:
         self.transaction(bytes([I2C_ADDRESS, reg, value]), 0)
