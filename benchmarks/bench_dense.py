@@ -97,7 +97,7 @@ def plane_sweep(
 def make_views(width: int, height: int, num: int) -> tuple[list, list[np.ndarray]]:
     """``num`` views of the box room across y (true cameras), grey from a JPEG (quality 95)."""
     from scenebot.dense.patchmatch import StereoView
-    from scenebot.dense.synthetic import box_room_scene, intrinsics, look_at_pose, render_view
+    from scenebot.testing.dense import box_room_scene, intrinsics, look_at_pose, render_view
 
     sc = box_room_scene()
     K = intrinsics(width, height)
@@ -125,7 +125,7 @@ def export_views(folder: Path, width: int, height: int, num: int) -> tuple[list,
     import shutil
 
     from scenebot.dense import workspace as ws
-    from scenebot.dense.synthetic import box_room_scene, make_dataset
+    from scenebot.testing.dense import box_room_scene, make_dataset
 
     shutil.rmtree(folder, ignore_errors=True)
     centers = np.stack([np.zeros(num), np.linspace(-0.3, 0.3, num), np.zeros(num)], axis=1)
@@ -226,7 +226,7 @@ def stage_quality(width: int, height: int, out: str, backend: str, per_row: int)
     from scenebot.dense import evaluate, stage
     from scenebot.dense import workspace as ws
     from scenebot.dense.config import DenseConfig
-    from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
+    from scenebot.testing.dense import box_room_scene, make_dataset, stereo_rig
 
     root = Path(out)
     shutil.rmtree(root, ignore_errors=True)

@@ -29,7 +29,6 @@ import numpy as np
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
-from scenebot.score import synthetic as syn
 from scenebot.score.candidates import sample_candidates
 from scenebot.score.config import MeshConfig, ScoreConfig
 from scenebot.score.freespace import compute_freespace
@@ -37,6 +36,7 @@ from scenebot.score.geometry import Intrinsics, read_sparse_map
 from scenebot.score.kernel import TaichiScorer, init_taichi, source_views_for_depth
 from scenebot.score.mesh import build_mesh, decimate
 from scenebot.score.reference import ReferenceScorer
+from scenebot.testing import score as syn
 
 RESOLUTIONS = [(40, 30), (80, 60), (160, 120)]
 SOURCES = [25, 100, 400]

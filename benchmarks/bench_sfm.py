@@ -131,7 +131,7 @@ def accuracy_by_seed(seeds: list[int], config: Path, work: Path, photos: int) ->
 
 
 def make_synthetic_rounds(scene: Path) -> None:
-    from scenebot.sfm.synthetic import SyntheticRoom, make_capture
+    from scenebot.testing.sfm import SyntheticRoom, make_capture
 
     room = SyntheticRoom()
     if not (scene / "round_000/capture/log.jsonl").exists():

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 from snakemake.utils import validate
 
+from scenebot._deps import command_files
 from scenebot.config import (
     ConfigError,
     check_config_files,
@@ -38,45 +39,13 @@ RESULTS = f"results/{SCENE}"
 PKG = Path(workflow.basedir) / "scenebot"
 MODEL_FILES = ["cameras.bin", "images.bin", "points3D.bin"]
 
+
 # The code each stage runs: a change re-runs exactly the stages that use it. The captures are
 # not listed: photos are data, re-taken when capture settings change (or with --forcerun).
-STAGE_CODE = {
-    "sfm": ["sfm", "capturelog.py", "jpeg.py"],
-    "mesh": [
-        "score/mesh.py",
-        "score/freespace.py",
-        "score/geometry.py",
-        "score/stage.py",
-    ],
-    "score": ["score"],
-    "goals": [
-        "score/goals.py",
-        "score/frontier.py",
-        "score/plots.py",
-        "score/stage.py",
-    ],
-    "plan": ["plan", "score/geometry.py"],
-    "dense": ["dense"],
-    "campaign": ["campaign.py", "capturelog.py", "jpeg.py"],
-    "tour": ["tour", "score/freespace.py"],
-    "evaluate": [
-        "evaluate",
-        "scene",
-        "sim/obstacles.py",
-        "sfm/evaluate.py",
-        "capturelog.py",
-        "jpeg.py",
-    ],
-}
-
-
-def stage_code(stage):
-    """The package files a stage depends on (inputs, so code changes re-run it)."""
-    files = []
-    for name in STAGE_CODE[stage]:
-        p = PKG / name
-        files += sorted(str(f) for f in p.rglob("*.py")) if p.is_dir() else [str(p)]
-    return files
+def stage_code(command):
+    """The package files that `python -m scenebot <command>` runs (the rule's code input),
+    computed from the imports: scenebot/_deps.py."""
+    return command_files(command, PKG)
 
 
 def stage_params(*sections):

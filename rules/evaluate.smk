@@ -6,7 +6,7 @@
 # keyed by the geometry and the settings), drawn top-down in the .png.
 rule observable:
     input:
-        code=stage_code("evaluate"),
+        code=stage_code("observable"),
     output:
         npz=f"{RESULTS}/eval/observable_surface.npz",
         png=report(
@@ -110,7 +110,7 @@ rule evaluation:
 # simulator from the truth; Spearman's rho between the heuristic score and PSNR.
 rule validity:
     input:
-        code=stage_code("evaluate"),
+        code=stage_code("validity"),
         candidates=validity_candidates,
         captures=validity_captures,
         dense=f"{RESULTS}/final/dense/fused.ply",
@@ -149,7 +149,7 @@ rule validity:
 # them from the campaigns already run).
 rule baselines:
     input:
-        code=stage_code("evaluate"),
+        code=stage_code("baselines"),
         final=f"{RESULTS}/final/evaluation.json",
         campaign=f"{RESULTS}/campaign.json",
     output:

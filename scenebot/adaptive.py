@@ -7,8 +7,8 @@ bumper finds). Writes ``round_{r}/capture/`` like round 0:
 
 * ``images/r{r}_NNNN.jpg``: the photos taken at the goals (read-only, never deleted);
 * ``nav/``: the localization photos taken on the way (kept, not part of the map; a re-take
-  archives them with everything else, see :func:`scenebot.capture.archive_previous`);
-* ``session.jsonl`` / ``log.jsonl`` (a hard link; see :mod:`scenebot.capture`): photo
+  archives them with everything else, see :func:`scenebot.capturesession.archive_previous`);
+* ``session.jsonl`` / ``log.jsonl`` (a hard link; see :mod:`scenebot.capturesession`): photo
   records carry ``odometry``, ``localization`` (the robot pose estimated from that very
   photo, map frame), ``localization_inliers`` and ``goal_index``; events ``follow_start``,
   ``localize``, ``obstacle``, ``replan``, ``follow_end``, ``goal_reached`` /
@@ -18,9 +18,9 @@ bumper finds). Writes ``round_{r}/capture/`` like round 0:
   folder (``nav/...``);
 * ``trajectory.png`` (a hard link to ``session.png``): the map-frame picture of the round
   (grid, planned and driven paths, fixes, photos, obstacles, goals reached and abandoned);
-* ``sim_state.json`` (simulator backends only): the world's true robot pose at the end, so
-  the next round's simulated world continues where this one stopped. It is physics state,
-  like the room itself; no decision reads it.
+* ``sim_state.json`` (simulator backends only, :func:`scenebot.robot.sim.write_sim_state`):
+  the world's true robot pose at the end, so the next round's simulated world continues
+  where this one stopped. It is physics state, like the room itself; no decision reads it.
 
 Photo pattern at a goal (``adaptive.pattern``): ``fan`` takes the goal heading and
 neighbours ``fan_step_deg`` apart (default 5 photos over 60 degrees: the heuristic asked for
@@ -34,7 +34,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import re
 import tempfile
 from collections.abc import Callable
@@ -43,14 +42,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from scenebot.capturelog import CaptureLog
+from scenebot.capturelog import CaptureLog, map_fingerprint
 from scenebot.config import Config
 from scenebot.explore import write_faults
+from scenebot.geometry import read_map_geometry, robot_xy_for_camera
 from scenebot.robot.base import Pose2D, wrap_angle
 
 log = logging.getLogger("scenebot.adaptive")
-
-SIM_STATE = "sim_state.json"
 
 
 def goal_headings(theta: float, cfg) -> list[float]:
@@ -74,50 +72,8 @@ def goal_headings(theta: float, cfg) -> list[float]:
     return sorted(out, key=lambda h: h - theta)
 
 
-def read_sim_state(capture_dir: Path) -> Pose2D | None:
-    """The simulated robot's true pose at the end of a capture, if that capture left one."""
-    p = Path(capture_dir) / SIM_STATE
-    if not p.exists():
-        return None
-    d = json.loads(p.read_text(encoding="utf-8"))["robot"]
-    return Pose2D(float(d["x"]), float(d["y"]), float(d["theta"]))
-
-
-def write_sim_state(capture_dir: Path, world) -> None:
-    """Save the simulated world's true robot pose (physics state for the next round),
-    atomically: a full disk leaves the earlier file or none, never a cut one."""
-    if world is None:
-        return
-    p = world.truth_pose
-    doc = {
-        "note": "simulator physics state for the next round; never read by a decision",
-        "robot": {"x": p.x, "y": p.y, "theta": p.theta},
-        "t": world.t,
-    }
-    dest = Path(capture_dir) / SIM_STATE
-    tmp = dest.with_name(f".{SIM_STATE}.{os.getpid()}.part")
-    try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(json.dumps(doc, indent=1))
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, dest)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def map_fingerprint(sfm_dir: Path) -> str:
-    """SHA-1 of a map's ``images.bin``: which map a round was driven with (the evaluation
-    notices when that map has been rebuilt since)."""
-    import hashlib
-
-    return hashlib.sha1((Path(sfm_dir) / "images.bin").read_bytes()).hexdigest()
-
-
 def map_end_pose(sfm_dir: Path, camera_offset_m: tuple[float, float]) -> Pose2D:
     """The robot pose of the map's last photo (where the previous round ended), map frame."""
-    from scenebot.plan.stage import read_map_geometry
-
     _, centres, _, headings = read_map_geometry(sfm_dir, with_headings=True)
     if len(centres) == 0:
         raise ValueError(f"{sfm_dir}: the map has no registered photos")
@@ -159,7 +115,7 @@ class SnappingPlanner:
         self.snap_m = snap_m
 
     def __call__(self, start_xy: np.ndarray, goal_xy: np.ndarray):
-        from scenebot.plan.stage import snap_to_free
+        from scenebot.plan.navgrid import snap_to_free
 
         snapped = snap_to_free(self.planner.grid, np.asarray(goal_xy, float), self.snap_m)
         return self.planner(start_xy, goal_xy if snapped is None else snapped)
@@ -304,7 +260,7 @@ def run_adaptive(
     Raises:
         FileNotFoundError: an input of the previous round is missing (names it).
     """
-    from scenebot.capture import capture_lock
+    from scenebot.capturesession import capture_lock
 
     if round_index < 1:
         raise ValueError("adaptive capture is for rounds >= 1 (round 0 explores)")
@@ -318,10 +274,9 @@ def _run_adaptive(
     cfg: Config, capture_dir: Path, round_index: int, prev: Path, progress: bool
 ) -> dict:
     """:func:`run_adaptive` holding the capture lock."""
-    from scenebot.capture import (
+    from scenebot.capturesession import (
         SESSION_LOG,
         finish_capture,
-        make_backend,
         save_sim_state,
         session_record,
         start_capture,
@@ -331,7 +286,7 @@ def _run_adaptive(
     from scenebot.localize import make_localizer
     from scenebot.plan.navgrid import NavGrid
     from scenebot.plan.path import GridPlanner
-    from scenebot.plan.stage import robot_xy_for_camera
+    from scenebot.robot.factory import make_backend
 
     need = {
         "map": prev / "sfm" / "images.bin",
@@ -357,7 +312,7 @@ def _run_adaptive(
     budget = min(acfg.max_photos, per_goal * len(paths))
 
     start_capture(capture_dir, ("images", "nav"))
-    robot, camera, world = make_backend(cfg, capture_dir, start=read_sim_state(prev / "capture"))
+    robot, camera, world = make_backend(cfg, capture_dir, previous_capture=prev / "capture")
     planner = SnappingPlanner(
         GridPlanner(NavGrid.load(need["grid"]), cfg.plan.simplify_factor), cfg.plan.goal_snap_m
     )

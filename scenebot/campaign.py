@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.capturelog import read_log
+from scenebot.capturelog import map_fingerprint, read_log
 
 
 def _load(p: Path) -> dict | None:
@@ -142,14 +142,12 @@ def summarize(scene_dir: Path, rounds: list[int], max_rounds: int, reach_m: floa
             prev_acc = _load(prev_sfm / "accuracy.json")
             entry["evaluation"] = _round_evaluation(records, prev_acc, reach_m)
             session = next((x for x in records if x.get("type") == "session"), {})
-            if session.get("map_sha1") and (prev_sfm / "images.bin").exists():
-                from scenebot.adaptive import map_fingerprint
-
-                if map_fingerprint(prev_sfm) != session["map_sha1"]:
-                    entry["evaluation"]["stale"] = (
-                        f"{prev_sfm} was rebuilt after this round was driven with it: the "
-                        "truth-based figures compare against the new map, not the one used"
-                    )
+            sha1 = session.get("map_sha1")
+            if sha1 and (prev_sfm / "images.bin").exists() and map_fingerprint(prev_sfm) != sha1:
+                entry["evaluation"]["stale"] = (
+                    f"{prev_sfm} was rebuilt after this round was driven with it: the "
+                    "truth-based figures compare against the new map, not the one used"
+                )
         out_rounds.append(entry)
     last = out_rounds[-1] if out_rounds else {}
     if last.get("complete"):

@@ -5,7 +5,9 @@ Record types (field ``type``):
 ``session`` (first line)
     ``robot`` (backend name), ``scene``, ``round``, ``started`` (ISO time),
     ``camera``: ``{"width", "height", "focal_px", "model": "PINHOLE"}`` as configured (a real
-    camera's EXIF is the authority; SfM reads EXIF, not this), ``config``: the stage config.
+    camera's EXIF is the authority; SfM reads EXIF, not this), ``config``: the stage config;
+    adaptive rounds also ``map`` (the previous round's map) and ``map_sha1``
+    (:func:`map_fingerprint`).
 ``photo``
     ``t`` (robot clock, s), ``index`` (0-based within the round), ``image`` (path relative to
     the capture folder, e.g. ``images/r000_0042.jpg``), ``odometry`` ``{x, y, theta}`` (m, rad,
@@ -149,3 +151,11 @@ def read_log(path: Path) -> Iterator[dict]:
 def photo_records(path: Path) -> list[dict]:
     """The ``photo`` records of a capture log, in order."""
     return [r for r in read_log(path) if r.get("type") == "photo"]
+
+
+def map_fingerprint(sfm_dir: Path) -> str:
+    """SHA-1 of a map's ``images.bin``: which map a round was driven with (the evaluation
+    notices when that map has been rebuilt since)."""
+    import hashlib
+
+    return hashlib.sha1((Path(sfm_dir) / "images.bin").read_bytes()).hexdigest()

@@ -144,11 +144,12 @@ def cmd_campaign(args) -> int:
 
 
 def cmd_nxt_emulator(args) -> int:
+    from scenebot.robot.factory import make_emulator_world
     from scenebot.robot.nxt.backend import serve_emulator
 
     cfg = _config(args)
     inbox = Path(args.inbox) if args.inbox else None
-    serve_emulator(cfg, cfg.nxt, cfg.nxt_emulator, inbox=inbox)
+    serve_emulator(make_emulator_world(cfg), cfg.nxt, cfg.nxt_emulator, inbox=inbox)
     return 0
 
 

@@ -8,12 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from scenebot.adaptive import goal_headings, map_end_pose, read_sim_state, write_sim_state
+from scenebot.adaptive import goal_headings, map_end_pose
 from scenebot.campaign import summarize
 from scenebot.config import AdaptiveConfig, Config
 from scenebot.plan import PlanConfig, build_navgrid
-from scenebot.plan.stage import plan_all, snap_to_free
+from scenebot.plan.navgrid import snap_to_free
+from scenebot.plan.stage import plan_all
 from scenebot.robot.base import Pose2D, wrap_angle
+from scenebot.robot.sim import read_sim_state, write_sim_state
 
 
 def test_fan_is_centred_on_the_goal_heading_and_sweeps_once():
@@ -181,7 +183,7 @@ def test_goal_error_is_measured_against_the_truth_in_the_map_frame(tmp_path):
 
 def test_map_end_pose_is_the_robot_behind_the_last_camera(tmp_path):
     pycolmap = pytest.importorskip("pycolmap")
-    from scenebot.sim.renderer import look_rotation
+    from scenebot.geometry import look_rotation
 
     rec = pycolmap.Reconstruction()
     cam = pycolmap.Camera(

@@ -26,8 +26,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from scenebot.capture import archive_previous, run_capture
+from scenebot.capture import run_capture
 from scenebot.capturelog import CaptureLog, photo_records, read_log
+from scenebot.capturesession import archive_previous
 from scenebot.config import validate_config
 from scenebot.robot.base import Health, Pose2D, Robot, SensorReading
 
@@ -302,7 +303,7 @@ HOLDER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from scenebot.capture import capture_lock
+    from scenebot.capturesession import capture_lock
     with capture_lock(Path(sys.argv[1])):
         print("locked", flush=True)
         time.sleep(120)
@@ -321,7 +322,7 @@ def _hold_lock(folder: Path) -> subprocess.Popen:
 
 
 def test_a_second_capture_of_a_round_is_refused_naming_the_holder(tmp_path):
-    from scenebot.capture import CaptureLockedError
+    from scenebot.capturesession import CaptureLockedError
 
     cap = tmp_path / "round_000" / "capture"
     run_capture(small_cfg(), cap, progress=False)
@@ -354,7 +355,7 @@ def test_a_lock_left_by_a_killed_capture_is_taken_over_with_a_warning(tmp_path, 
 
 
 def test_a_lock_held_on_another_host_is_not_taken_over(tmp_path):
-    from scenebot.capture import LOCK_NAME, CaptureLockedError
+    from scenebot.capturesession import LOCK_NAME, CaptureLockedError
 
     cap = tmp_path / "capture"
     cap.mkdir()
@@ -366,7 +367,7 @@ def test_a_lock_held_on_another_host_is_not_taken_over(tmp_path):
 
 
 def test_the_lock_is_released_when_the_capture_ends(tmp_path):
-    from scenebot.capture import capture_lock
+    from scenebot.capturesession import capture_lock
 
     cap = tmp_path / "capture"
     run_capture(small_cfg(), cap, progress=False)

@@ -7,9 +7,10 @@ from scenebot.dense.evaluate import (
     cloud_metrics,
     depth_map_metrics,
     normal_angle_deg,
+    sample_surface,
     visible_surface_samples,
 )
-from scenebot.dense.synthetic import box_room_scene, intrinsics, look_at_pose, sample_surface
+from scenebot.testing.dense import box_room_scene, intrinsics, look_at_pose
 
 
 def test_depth_map_metrics():

@@ -12,7 +12,7 @@ import cv2, numpy as np
 from scenebot.dense.config import PatchMatchConfig
 from scenebot.dense.evaluate import depth_map_metrics
 from scenebot.dense.patchmatch import PatchMatchSolver, StereoView, init_taichi
-from scenebot.dense.synthetic import box_room_scene, intrinsics, look_at_pose, render_view
+from scenebot.testing.dense import box_room_scene, intrinsics, look_at_pose, render_view
 arch = init_taichi("gpu")
 sc = box_room_scene()
 K = intrinsics(320, 240)

@@ -7,7 +7,7 @@ import pytest
 from scenebot.dense.config import PatchMatchConfig
 from scenebot.dense.evaluate import depth_map_metrics, normal_angle_deg
 from scenebot.dense.patchmatch import PatchMatchSolver, StereoView, init_taichi
-from scenebot.dense.synthetic import box_room_scene, intrinsics, look_at_pose, render_view
+from scenebot.testing.dense import box_room_scene, intrinsics, look_at_pose, render_view
 
 W, H = 256, 192
 

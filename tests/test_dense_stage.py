@@ -13,7 +13,7 @@ from scenebot.dense import workspace as ws
 from scenebot.dense.colmap_io import read_array, write_array
 from scenebot.dense.config import DenseConfig
 from scenebot.dense.evaluate import depth_map_metrics, mesh_raycaster
-from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
+from scenebot.testing.dense import box_room_scene, make_dataset, stereo_rig
 
 W, H = 192, 144
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from scenebot.dense.synthetic import box_room_scene, make_dataset
 from scenebot.dense.views import select_views
+from scenebot.testing.dense import box_room_scene, make_dataset
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import box_room
 
 from scenebot.evaluate.breakdown import (
     completeness_breakdown,
@@ -18,6 +17,7 @@ from scenebot.evaluate.breakdown import (
     texture_contrast,
 )
 from scenebot.evaluate.observable import sample_surface_weighted
+from tests.fixtures.rooms import box_room
 
 BOX = ((1.0, 1.0, 0.0), (1.6, 1.6, 0.5))
 # a camera at (3.5, 1.3) at 0.35 m looking west (-x): OpenCV axes right = +y, down = -z

@@ -9,9 +9,9 @@ import pytest
 
 from scenebot.dense import workspace as ws
 from scenebot.dense.colmap_io import write_array
-from scenebot.dense.synthetic import box_room_scene, make_dataset, stereo_rig
 from scenebot.evaluate.depthmaps import evaluate_depth_maps
 from scenebot.evaluate.metrics import Similarity
+from scenebot.testing.dense import box_room_scene, make_dataset, stereo_rig
 
 W, H = 96, 72
 

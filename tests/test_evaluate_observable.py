@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import box_room
 
 from scenebot.config import Config
 from scenebot.evaluate.config import EvaluateConfig
@@ -20,6 +19,7 @@ from scenebot.evaluate.observable import (
     triangle_normals,
 )
 from scenebot.robot.base import Pose2D
+from tests.fixtures.rooms import box_room
 
 BOX = ((1.0, 1.0, 0.0), (1.6, 1.6, 0.5))  # top at 0.5 m: above the 0.35 m camera
 

@@ -7,7 +7,6 @@ import json
 import numpy as np
 import open3d as o3d
 import pytest
-from conftest import box_room
 from scipy.spatial.transform import Rotation
 
 from scenebot.capturelog import CaptureLog
@@ -24,8 +23,9 @@ from scenebot.evaluate.metrics import (
 )
 from scenebot.evaluate.observable import observable_surface
 from scenebot.evaluate.stage import EvaluateInputs, EvaluateOutputs, run
-from scenebot.score.synthetic import default_intrinsics, write_colmap_model
 from scenebot.sim.renderer import look_rotation
+from scenebot.testing.score import default_intrinsics, write_colmap_model
+from tests.fixtures.rooms import box_room
 
 ECFG = EvaluateConfig(grid_step_m=0.4, headings=6, sample_spacing_m=0.05)
 # the map's robot frame: world = S * R @ robot + T (a yawed, scaled, shifted frame)

@@ -15,7 +15,7 @@ from scenebot.robot.base import Camera, Pose2D
 from scenebot.robot.sim import SimRobot
 from scenebot.scene.office import office
 from scenebot.sim.world import SimWorld
-from tests.conftest import box_room
+from tests.fixtures.rooms import box_room
 
 
 class PoseOnlyCamera(Camera):

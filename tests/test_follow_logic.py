@@ -12,7 +12,6 @@ import pytest
 from scenebot.capturelog import CaptureLog, read_log
 from scenebot.follow import FollowConfig, PathFollower, compose_odometry, robot_pose_from_camera
 from scenebot.localize.locate import FailureReason, LocalizationFailure, PoseEstimate
-from scenebot.localize.synthetic import camera_rotation
 from scenebot.plan import PlanConfig, build_navgrid
 from scenebot.plan.path import GridPlanner
 from scenebot.robot.base import (
@@ -24,6 +23,7 @@ from scenebot.robot.base import (
     Robot,
     SensorReading,
 )
+from tests.fixtures.localize import camera_rotation
 
 CAM_FWD = 0.1
 

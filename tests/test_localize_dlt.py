@@ -18,7 +18,7 @@ from scenebot.localize.dlt import (
     ransac_dlt_pose,
     refine_f_r_t,
 )
-from scenebot.localize.synthetic import camera_rotation
+from tests.fixtures.localize import camera_rotation
 
 
 def _scene(rng, n=300, f=520.0, heading=0.4, centre=(1.0, 2.0, 0.0)):

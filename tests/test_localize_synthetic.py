@@ -18,7 +18,7 @@ from scenebot.localize import (
     localize,
     make_localizer,
 )
-from scenebot.localize.synthetic import BoxRoom, build_map, camera_rotation
+from tests.fixtures.localize import BoxRoom, build_map, camera_rotation
 
 
 @pytest.fixture(scope="module")

@@ -8,82 +8,8 @@ import pytest
 
 from scenebot.robot.base import BatteryLowError, LinkLostError
 from scenebot.robot.nxt import protocol as p
-from scenebot.robot.nxt.client import READ_SLICE_S, BrickNotAnsweringError, NxtClient
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-        self.lock = threading.Lock()
-
-    def monotonic(self) -> float:
-        return self.t
-
-    def sleep(self, s: float) -> None:
-        with self.lock:
-            self.t += max(0.0, s)
-
-
-class FakeBrick:
-    """A pyserial-like transport: ``respond(telegram) -> list[(delay_s, bytes)]``.
-
-    Bytes become readable when the fake clock reaches their time; a read with nothing
-    available advances the clock by one read slice, as a real serial timeout would.
-    """
-
-    def __init__(self, clock: FakeClock, respond, chunk: int = 64):
-        self.clock, self.respond, self.chunk = clock, respond, chunk
-        self.written: list[bytes] = []
-        self.queue: list[tuple[float, bytes]] = []
-        self.outstanding = 0
-        self.overlap = False
-        self.closed = False
-        self.fail_read: Exception | None = None
-        self.last_out = 0.0
-
-    def write(self, data: bytes) -> int:
-        if self.outstanding:
-            self.overlap = True
-        self.written.append(bytes(data))
-        telegram = data[2:]
-        if telegram[0] == p.DIRECT_REPLY:
-            self.outstanding += 1
-        for delay, out in self.respond(telegram) or []:
-            # the brick answers in order: a late reply delays the ones after it
-            self.last_out = max(self.clock.t + delay, self.last_out)
-            self.queue.append((self.last_out, out))
-        self.queue.sort(key=lambda e: e[0])
-        return len(data)
-
-    def _ready(self) -> bytes:
-        return b"".join(b for t, b in self.queue if t <= self.clock.t)
-
-    @property
-    def in_waiting(self) -> int:
-        return len(self._ready())
-
-    def read(self, n: int = 1) -> bytes:
-        if self.fail_read is not None:
-            raise self.fail_read
-        now = self.clock.t
-        ready = self._ready()
-        if not ready:
-            self.clock.sleep(READ_SLICE_S)
-            return b""
-        out = ready[: min(n, self.chunk)]
-        rest = ready[len(out) :]
-        future = [(t, b) for t, b in self.queue if t > now]
-        self.queue = ([(now, rest)] if rest else []) + future
-        if not rest:
-            self.outstanding = max(0, self.outstanding - 1)
-        return out
-
-    def reset_input_buffer(self) -> None:
-        now = self.clock.t
-        self.queue = [(t, b) for t, b in self.queue if t > now]
-
-    def close(self) -> None:
-        self.closed = True
+from scenebot.robot.nxt.client import BrickNotAnsweringError, NxtClient
+from tests.fixtures.nxt_wire import FakeBrick, FakeClock
 
 
 def brick_answer(telegram: bytes, battery=8100, sleep_ms=600000, status=0):

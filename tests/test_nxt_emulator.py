@@ -18,11 +18,11 @@ import serial
 from scenebot.robot.base import CameraError, LinkLostError, MotionStatus, Pose2D
 from scenebot.robot.nxt import EmulatorConfig, FaultConfig, NxtConfig, connect, make_nxt_robot
 from scenebot.robot.nxt import protocol as p
-from scenebot.robot.nxt.boxworld import BoxWorld
 from scenebot.robot.nxt.camera import NxtCamera
 from scenebot.robot.nxt.client import BrickNotAnsweringError, PortBusyError, PortNotFoundError
 from scenebot.robot.nxt.emulator import NxtEmulator
 from scenebot.robot.nxt.robot import Terminated, install_sigterm_handler
+from tests.fixtures.boxworld import BoxWorld
 
 SCALE = 3.0  # simulated seconds per wall second
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import pytest
-from test_nxt_client import FakeBrick, FakeClock
 
 from scenebot.robot.base import Pose2D
 from scenebot.robot.nxt import protocol as p
@@ -20,6 +19,7 @@ from scenebot.robot.nxt.sensors import (
     Ultrasonic,
     compass_to_ccw,
 )
+from tests.fixtures.nxt_wire import FakeBrick, FakeClock
 
 
 class I2CBrick:

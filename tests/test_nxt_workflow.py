@@ -9,6 +9,7 @@ import pytest
 from scenebot.capturelog import CaptureLog, read_log
 from scenebot.config import validate_config
 from scenebot.explore import PhotoTaker, random_exploration
+from scenebot.robot.factory import make_emulator_world
 from scenebot.robot.nxt import EmulatorConfig, NxtConfig
 from scenebot.robot.nxt.backend import make_nxt_backend
 
@@ -20,10 +21,9 @@ def test_random_exploration_through_nxt_emulator(tmp_path):
     )
     out = tmp_path / "round_000" / "capture"
     (out / "images").mkdir(parents=True)
-    robot, camera, _world = make_nxt_backend(
-        cfg,
+    robot, camera = make_nxt_backend(
         NxtConfig(),
-        emulated=True,
+        world=make_emulator_world(cfg),
         inbox=out / "inbox",
         emulator=EmulatorConfig(time_scale=2.0),
     )
@@ -70,8 +70,8 @@ def test_reboot_right_after_the_third_photo(tmp_path):
     )
     out = tmp_path / "round_000" / "capture"
     (out / "images").mkdir(parents=True)
-    robot, camera, _world = make_nxt_backend(
-        cfg, NxtConfig(), emulated=True, inbox=out / "inbox",
+    robot, camera = make_nxt_backend(
+        NxtConfig(), world=make_emulator_world(cfg), inbox=out / "inbox",
         emulator=EmulatorConfig(time_scale=2.0),
     )  # fmt: skip
     emu = robot.emulator

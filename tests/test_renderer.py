@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from scenebot.geometry import Intrinsics, look_rotation
 from scenebot.jpeg import exif_focal_px, write_jpeg
 from scenebot.scene import textures as tx
 from scenebot.scene.mesh import Material, SceneBuilder
-from scenebot.sim.renderer import Intrinsics, Renderer, look_rotation
+from scenebot.sim.renderer import Renderer
 
 
 def marker_scene(point):

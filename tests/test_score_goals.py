@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
-from scenebot.score import synthetic as syn
 from scenebot.score.candidates import read_candidates
 from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
 from scenebot.score.freespace import FreeSpace, cut_segments, point_segment_distance
@@ -28,6 +27,7 @@ from scenebot.score.stage import (
     run_mesh,
     run_score,
 )
+from scenebot.testing import score as syn
 
 
 @settings(max_examples=60, deadline=None)

@@ -7,9 +7,9 @@ import pytest
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
-from scenebot.score import synthetic as syn
 from scenebot.score.geometry import candidate_views
 from scenebot.score.kernel import init_taichi
+from scenebot.testing import score as syn
 
 RING_CENTRES = [[-1.5, -0.5], [0.0, 0.5], [1.5, -1.0], [-0.5, -1.2], [2.0, 1.0]]
 

@@ -9,7 +9,6 @@ import pytest
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
-from scenebot.score import synthetic as syn
 from scenebot.score.candidates import sample_candidates
 from scenebot.score.config import MeshConfig
 from scenebot.score.freespace import (
@@ -21,6 +20,7 @@ from scenebot.score.freespace import (
 )
 from scenebot.score.mesh import MeshError, build_mesh, check_mesh, read_mesh
 from scenebot.score.stage import MeshInputs, MeshOutputs, run_mesh
+from scenebot.testing import score as syn
 
 ROOM = (6.0, 4.0)
 RINGS = [[-1.5, -0.5], [0.0, 0.5], [1.5, -1.0], [-0.5, -1.2], [-2.0, 1.0]]

@@ -15,7 +15,7 @@ from scenebot.sfm.photos import (
     inspect_photo,
     photos_from_folder,
 )
-from scenebot.sfm.synthetic import write_jpeg_with_exif
+from scenebot.testing.sfm import write_jpeg_with_exif
 
 
 def _img(seed=0, w=160, h=120):

@@ -18,7 +18,7 @@ from scenebot.sfm.config import KnownDistance, SfmConfig
 from scenebot.sfm.features import open_database
 from scenebot.sfm.mapping import SfmError
 from scenebot.sfm.stage import SfmInputs, SfmOutputs, run
-from scenebot.sfm.synthetic import SyntheticRoom, make_capture, write_jpeg_with_exif
+from scenebot.testing.sfm import SyntheticRoom, make_capture, write_jpeg_with_exif
 
 
 def _digest(folder):

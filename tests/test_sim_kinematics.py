@@ -9,7 +9,7 @@ import pytest
 from scenebot.robot.base import MotionStatus, Pose2D
 from scenebot.robot.sim import SimRobot
 from scenebot.sim.world import SimWorld, StartPoseError
-from tests.conftest import box_room
+from tests.fixtures.rooms import box_room
 
 
 def make(scene, cfg, start, seed=0):

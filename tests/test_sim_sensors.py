@@ -19,7 +19,7 @@ def test_ultrasonic_measures_the_distance_to_a_wall(room, no_noise_cfg):
 
 
 def test_ultrasonic_reports_no_echo_beyond_its_range(no_noise_cfg):
-    from tests.conftest import box_room
+    from tests.fixtures.rooms import box_room
 
     big = box_room(size=(8.0, 3.0), start=(1.0, 1.5, 0.0))
     world = SimWorld(big, no_noise_cfg, Pose2D(1.0, 1.5, 0.0))

@@ -37,7 +37,7 @@ pytestmark = [
 def tour_dir(tmp_path_factory):
     from scenebot.tour.config import TourConfig
     from scenebot.tour.stage import TourInputs, TourOutputs, run
-    from scenebot.tour.synthetic import make_tour_dataset
+    from tests.fixtures.tour import make_tour_dataset
 
     root = tmp_path_factory.mktemp("tour_browser")
     ds = make_tour_dataset(root / "capture", width=128, height=96, per_stop=10)

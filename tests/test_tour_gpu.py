@@ -53,7 +53,7 @@ def _render(root, arch, out):
 @pytest.mark.gpu
 def test_gpu_matches_cpu(tmp_path):
     from scenebot.tour.evaluate import psnr
-    from scenebot.tour.synthetic import make_tour_dataset
+    from tests.fixtures.tour import make_tour_dataset
 
     ds = make_tour_dataset(tmp_path / "capture", width=128, height=96, per_stop=10)
     gpu = _render(ds.root, "gpu", tmp_path / "gpu.npy")

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenebot.dense import synthetic as syn
+from scenebot.testing import dense as syn
 from scenebot.tour.camera import TourInputError
 from scenebot.tour.config import PathConfig
 from scenebot.tour.path import ClearanceChecker, cluster_waypoints, plan_tour
-from scenebot.tour.synthetic import rig
+from tests.fixtures.tour import rig
 
 
 @pytest.fixture(scope="module")

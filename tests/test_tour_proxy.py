@@ -9,7 +9,7 @@ os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 import numpy as np
 import pytest
 
-from scenebot.dense import synthetic as syn
+from scenebot.testing import dense as syn
 from scenebot.tour._ti import init_taichi
 from scenebot.tour.camera import Camera, TourInputError, look_rotation
 from scenebot.tour.config import ProxyConfig

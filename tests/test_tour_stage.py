@@ -16,7 +16,7 @@ import pytest
 from scenebot.tour.camera import TourInputError
 from scenebot.tour.config import TourConfig
 from scenebot.tour.stage import TourInputs, TourOutputs, run
-from scenebot.tour.synthetic import make_tour_dataset
+from tests.fixtures.tour import make_tour_dataset
 
 FRAMES = 24
 
@@ -80,7 +80,7 @@ def test_viewer_data(tour):
 
 def test_frames_are_consistent_with_the_scene(tour):
     # frame 0 against a true render of the same pose
-    from scenebot.dense import synthetic as syn
+    from scenebot.testing import dense as syn
     from scenebot.tour.camera import Camera, look_rotation
     from scenebot.tour.evaluate import psnr
 

@@ -10,14 +10,14 @@ import numpy as np
 import pycolmap
 import pytest
 
-from scenebot.dense import synthetic as syn
+from scenebot.testing import dense as syn
 from scenebot.tour._ti import init_taichi
 from scenebot.tour.camera import Camera
 from scenebot.tour.config import TourConfig
 from scenebot.tour.evaluate import leave_one_out, psnr, ssim
 from scenebot.tour.proxy import load_proxy
-from scenebot.tour.synthetic import make_tour_dataset
 from scenebot.tour.ulr import UlrRenderer, load_sources
+from tests.fixtures.tour import make_tour_dataset
 
 
 @pytest.fixture(scope="module")

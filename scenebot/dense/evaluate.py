@@ -63,6 +63,31 @@ def mesh_raycaster(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometr
     return rc
 
 
+def sample_surface(
+    vertices: np.ndarray, triangles: np.ndarray, n: int, seed: int = 0
+) -> np.ndarray:
+    """Area-uniform random points on a triangle mesh.
+
+    Args:
+        vertices: (V, 3) vertices, metres.
+        triangles: (T, 3) vertex indices.
+        n: number of points.
+        seed: random seed.
+
+    Returns:
+        (n, 3) float64 points, metres.
+    """
+    rng = np.random.default_rng(seed)
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    tri = rng.choice(len(triangles), size=n, p=area / area.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s1 = np.sqrt(r1)
+    return (
+        (1 - s1)[:, None] * a[tri] + (s1 * (1 - r2))[:, None] * b[tri] + (s1 * r2)[:, None] * c[tri]
+    )
+
+
 def visible_surface_samples(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -90,8 +115,6 @@ def visible_surface_samples(
         (M, 3) float64 visible surface points.
     """
     import open3d as o3d
-
-    from scenebot.dense.synthetic import sample_surface
 
     v = np.asarray(vertices, np.float64)
     tri = np.asarray(triangles)

@@ -57,7 +57,8 @@ def photo_visibility(
     Yields:
         Per photo, the (K,) increasing int32 indices into ``points`` of the samples it sees.
     """
-    from scenebot.sim.renderer import Intrinsics, Renderer
+    from scenebot.geometry import Intrinsics
+    from scenebot.sim.renderer import Renderer
 
     points = np.asarray(points, np.float64)
     w, h = size

@@ -40,10 +40,10 @@ import cv2
 import numpy as np
 
 from scenebot.evaluate.config import EvaluateConfig
+from scenebot.geometry import Intrinsics, look_rotation
 from scenebot.robot.base import Pose2D
 from scenebot.scene.mesh import SceneMesh
 from scenebot.sim.obstacles import ObstacleMap
-from scenebot.sim.renderer import Intrinsics, look_rotation
 
 log = logging.getLogger(__name__)
 

@@ -132,7 +132,7 @@ def model_similarity(src_dir: Path, dst_dir: Path) -> tuple[float, np.ndarray, n
 
 def _candidate_pose(x: float, y: float, theta: float) -> tuple[np.ndarray, np.ndarray]:
     """cam_from_world (R, t) of a scored candidate: the score stage's horizontal camera."""
-    from scenebot.score.geometry import planar_cam_from_world
+    from scenebot.geometry import planar_cam_from_world
 
     Rt = planar_cam_from_world(np.array([x]), np.array([y]), np.array([theta]))[0]
     return Rt[:9].reshape(3, 3), Rt[9:]
@@ -175,9 +175,10 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
     from tqdm import tqdm
 
     from scenebot.evaluate.stage import has_scene_truth
+    from scenebot.geometry import Intrinsics
     from scenebot.scene.loader import load_world_scene
     from scenebot.score.candidates import read_candidates
-    from scenebot.sim.renderer import Intrinsics, Renderer
+    from scenebot.sim.renderer import Renderer
     from scenebot.tour._ti import init_taichi
     from scenebot.tour.camera import Camera
     from scenebot.tour.evaluate import psnr, ssim

@@ -246,3 +246,32 @@ def build_navgrid(
     hi = cams.max(axis=0) + cfg.margin_m
     geometry = GridGeometry.around(lo, hi, cfg.n_cells)
     return grid_from_counts(obstacle_counts(points_xyz, geometry, cfg), geometry, cfg)
+
+
+def snap_to_free(grid: NavGrid, xy: np.ndarray, radius_m: float) -> np.ndarray | None:
+    """``xy`` if its cell is free, else the centre of the nearest free cell within
+    ``radius_m`` (m), else ``None`` (also when ``xy`` lies outside the grid).
+
+    Args:
+        grid: the navigation grid.
+        xy: (2,) position (m, map frame).
+        radius_m: how far the position may move.
+    """
+    geo = grid.geometry
+    cell = geo.cell_of(xy)
+    if not geo.contains_cell(cell):
+        return None
+    if not grid.lethal[cell[0], cell[1]]:
+        return np.asarray(xy, float)
+    k = int(np.ceil(radius_m / geo.cell_m))
+    ny, nx = geo.shape
+    r0, r1 = max(cell[0] - k, 0), min(cell[0] + k + 1, ny)
+    c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, nx)
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    free = ~grid.lethal[r0:r1, c0:c1]
+    if not free.any():
+        return None
+    centres = geo.centre_of(np.stack([rr[free], cc[free]], axis=-1))
+    d = np.hypot(centres[:, 0] - xy[0], centres[:, 1] - xy[1])
+    j = int(np.argmin(d))
+    return centres[j] if d[j] <= radius_m else None

@@ -31,8 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
+from scenebot.geometry import read_map_geometry, robot_xy_for_camera
 from scenebot.plan.config import PlanConfig
-from scenebot.plan.navgrid import NavGrid, build_navgrid
+from scenebot.plan.navgrid import NavGrid, build_navgrid, snap_to_free
 from scenebot.plan.path import PlanFailure, plan_path
 
 
@@ -53,38 +54,6 @@ class PlanOutputs:
     plot_png: Path | None = None
 
 
-def read_map_geometry(sfm_dir: Path, with_headings: bool = False):
-    """3D points and camera centres of a COLMAP model.
-
-    Args:
-        sfm_dir: folder with cameras.bin, images.bin, points3D.bin.
-
-    Returns:
-        points (N, 3) m, camera centres (M, 3) m of the registered images and their names in
-        image-name order; with ``with_headings`` also (M,) headings (rad) of the optical axes.
-
-    Raises:
-        FileNotFoundError: the folder does not hold a COLMAP model.
-    """
-    import pycolmap
-
-    sfm_dir = Path(sfm_dir)
-    if not (sfm_dir / "images.bin").exists() and not (sfm_dir / "images.txt").exists():
-        raise FileNotFoundError(
-            f"{sfm_dir}: no COLMAP model (images.bin); run the sfm stage for this round first"
-        )
-    rec = pycolmap.Reconstruction(str(sfm_dir))
-    pts = np.array([p.xyz for p in rec.points3D.values()], float).reshape(-1, 3)
-    imgs = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
-    centres = np.array([im.projection_center() for im in imgs], float).reshape(-1, 3)
-    names = [im.name for im in imgs]
-    if not with_headings:
-        return pts, centres, names
-    fwd = [np.asarray(im.cam_from_world().rotation.matrix())[2] for im in imgs]
-    headings = np.array([np.arctan2(f[1], f[0]) for f in fwd], float)
-    return pts, centres, names, headings
-
-
 def read_goals(goals_json: Path, key: str = "goals") -> list[dict]:
     """Goals (or with ``key="backups"`` the backups) as dicts with at least ``x`` and ``y``
     (m), see the module docstring."""
@@ -102,50 +71,6 @@ def read_goals(goals_json: Path, key: str = "goals") -> list[dict]:
         else:
             raise ValueError(f"{goals_json}: goal {i} is neither {{x, y, ...}} nor [x, y, theta]")
     return goals
-
-
-def robot_xy_for_camera(
-    camera_xy: np.ndarray, heading: float, camera_offset_m: tuple[float, float]
-) -> np.ndarray:
-    """Where the robot's rotation axis is when its camera centre is at ``camera_xy``.
-
-    Args:
-        camera_xy: (2,) camera centre (m).
-        heading: robot heading (rad).
-        camera_offset_m: camera centre (forward, left) of the rotation axis (m).
-    """
-    fwd, left = camera_offset_m
-    c, s = np.cos(heading), np.sin(heading)
-    return np.asarray(camera_xy, float) - np.array([fwd * c - left * s, fwd * s + left * c])
-
-
-def snap_to_free(grid: NavGrid, xy: np.ndarray, radius_m: float) -> np.ndarray | None:
-    """``xy`` if its cell is free, else the centre of the nearest free cell within
-    ``radius_m`` (m), else ``None`` (also when ``xy`` lies outside the grid).
-
-    Args:
-        grid: the navigation grid.
-        xy: (2,) position (m, map frame).
-        radius_m: how far the position may move.
-    """
-    geo = grid.geometry
-    cell = geo.cell_of(xy)
-    if not geo.contains_cell(cell):
-        return None
-    if not grid.lethal[cell[0], cell[1]]:
-        return np.asarray(xy, float)
-    k = int(np.ceil(radius_m / geo.cell_m))
-    ny, nx = geo.shape
-    r0, r1 = max(cell[0] - k, 0), min(cell[0] + k + 1, ny)
-    c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, nx)
-    rr, cc = np.mgrid[r0:r1, c0:c1]
-    free = ~grid.lethal[r0:r1, c0:c1]
-    if not free.any():
-        return None
-    centres = geo.centre_of(np.stack([rr[free], cc[free]], axis=-1))
-    d = np.hypot(centres[:, 0] - xy[0], centres[:, 1] - xy[1])
-    j = int(np.argmin(d))
-    return centres[j] if d[j] <= radius_m else None
 
 
 def plan_all(

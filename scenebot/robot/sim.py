@@ -4,11 +4,18 @@ The robot controls the simulated wheels exactly as a motor controller would: it 
 speeds, watches the encoders (tacho counts) to know when a motion is done, integrates them
 into odometry, stops when a bumper closes, and declares a stall when the wheels stop making
 progress. It never looks at the true pose.
+
+The simulator's state between rounds (:func:`write_sim_state`, :func:`read_sim_state`): the
+world's true robot pose at the end of a capture, ``sim_state.json`` in the capture folder, so
+the next round's simulated world continues where this one stopped. It is physics state, like
+the room itself; no decision reads it.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections import deque
 from pathlib import Path
 
@@ -145,3 +152,39 @@ class SimCamera(Camera):
         store_photo(dest, self.world.render_jpeg)
         self.world.step(self.world.cfg.photo_time_s)
         return dest
+
+
+SIM_STATE = "sim_state.json"
+
+
+def read_sim_state(capture_dir: Path) -> Pose2D | None:
+    """The simulated robot's true pose at the end of a capture, if that capture left one."""
+    p = Path(capture_dir) / SIM_STATE
+    if not p.exists():
+        return None
+    d = json.loads(p.read_text(encoding="utf-8"))["robot"]
+    return Pose2D(float(d["x"]), float(d["y"]), float(d["theta"]))
+
+
+def write_sim_state(capture_dir: Path, world) -> None:
+    """Save the simulated world's true robot pose (physics state for the next round),
+    atomically: a full disk leaves the earlier file or none, never a cut one. A real robot
+    (``world`` None) leaves none."""
+    if world is None:
+        return
+    p = world.truth_pose
+    doc = {
+        "note": "simulator physics state for the next round; never read by a decision",
+        "robot": {"x": p.x, "y": p.y, "theta": p.theta},
+        "t": world.t,
+    }
+    dest = Path(capture_dir) / SIM_STATE
+    tmp = dest.with_name(f".{SIM_STATE}.{os.getpid()}.part")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(doc, indent=1))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, dest)
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -1,9 +1,9 @@
-"""Camera geometry shared by the taichi scorer and its numpy reference.
+"""Camera geometry of the taichi scorer and its numpy reference: packed views, the map's
+points and source cameras.
 
-Conventions: world frame in metres, z up, the camera plane is z = 0; camera axes as in
-OpenCV/COLMAP (x right, y down, z forward); poses are ``cam_from_world`` (R, t) so that a world
-point X maps to ``R @ X + t`` in camera coordinates; pixel (i, j) has its centre at
-image coordinates (i + 0.5, j + 0.5) (COLMAP's convention).
+Conventions as in :mod:`scenebot.geometry` (where :class:`Intrinsics` and
+:func:`planar_cam_from_world` live): world frame in metres, z up, the camera plane is z = 0;
+camera axes as in OpenCV/COLMAP (x right, y down, z forward); poses are ``cam_from_world``.
 
 A set of pinhole views is packed as an ``(N, 19)`` float array, one row per view:
 ``R`` row-major (9), ``t`` (3), camera centre ``C = -R^T t`` (3), ``fx, fy, cx, cy`` (4, pixels).
@@ -16,75 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from scenebot.geometry import Intrinsics, planar_cam_from_world
+
 VIEW_COLS = 19
 """Columns of a packed view array."""
-
-
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics of a render (pixels).
-
-    Attributes:
-        width: image width (pixels).
-        height: image height (pixels).
-        fx: focal length along x (pixels).
-        fy: focal length along y (pixels).
-        cx: principal point x (pixels, image coordinates with pixel centres at +0.5).
-        cy: principal point y (pixels).
-    """
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    def scaled(self, width: int, height: int | None = None) -> Intrinsics:
-        """The same field of view at another resolution.
-
-        Args:
-            width: new width (pixels).
-            height: new height (pixels); default keeps the aspect ratio.
-
-        Returns:
-            The rescaled intrinsics.
-        """
-        sx = width / self.width
-        if height is None:
-            height = max(1, round(self.height * sx))
-        sy = height / self.height
-        return Intrinsics(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy)
-
-    @staticmethod
-    def from_hfov(width: int, height: int, hfov_deg: float) -> Intrinsics:
-        """Square-pixel intrinsics with a horizontal field of view (degrees)."""
-        f = 0.5 * width / np.tan(np.deg2rad(hfov_deg) / 2)
-        return Intrinsics(width, height, f, f, width / 2, height / 2)
-
-
-def planar_cam_from_world(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """Rotation and translation of horizontal cameras at height z = 0.
-
-    The camera looks along heading ``theta`` (rad, counter-clockwise from world +x), its image
-    x axis points to the right and its y axis straight down (world -z).
-
-    Args:
-        x: (N,) camera centre x (m).
-        y: (N,) camera centre y (m).
-        theta: (N,) heading (rad).
-
-    Returns:
-        (N, 12) array: R row-major (9) then t (3), cam_from_world.
-    """
-    x, y, theta = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (x, y, theta))
-    c, s = np.cos(theta), np.sin(theta)
-    z0, one = np.zeros_like(c), np.ones_like(c)
-    # rows: x_cam (right) = (s, -c, 0); y_cam (down) = (0, 0, -1); z_cam (forward) = (c, s, 0)
-    R = np.stack([s, -c, z0, z0, z0, -one, c, s, z0], axis=1).reshape(-1, 3, 3)
-    C = np.stack([x, y, z0], axis=1)
-    t = -np.einsum("nij,nj->ni", R, C)
-    return np.concatenate([R.reshape(-1, 9), t], axis=1)
 
 
 def pack_views(R: np.ndarray, t: np.ndarray, intr: Intrinsics | list[Intrinsics]) -> np.ndarray:

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenebot.score.geometry import Intrinsics, candidate_views
+from scenebot.geometry import Intrinsics
+from scenebot.score.geometry import candidate_views
 from scenebot.score.kernel import ScoreResult, summarize
 
 

@@ -403,7 +403,7 @@ def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs
     The candidates' scores are still reported (``best_score_deg``) so campaigns compare, but
     they choose nothing; the map is complete when no frontier is left.
     """
-    from scenebot.plan.stage import read_map_geometry
+    from scenebot.geometry import read_map_geometry
     from scenebot.score.frontier import frontier_cells, frontier_goals, seen_cells
 
     if inputs.sfm_dir is None:

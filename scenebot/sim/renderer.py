@@ -8,57 +8,19 @@ sub-pixel rays at pixels whose neighbours differ in depth or surface.
 
 Camera axes follow OpenCV/COLMAP: x right, y down, z forward; a pose is ``R_cam_from_world``
 (3, 3) and the centre (3,) in world coordinates. Pixel (i, j) has its centre at
-``(j + 0.5, i + 0.5)`` in the image plane, like COLMAP.
+``(j + 0.5, i + 0.5)`` in the image plane, like COLMAP. The camera model
+(:class:`~scenebot.geometry.Intrinsics`, :func:`~scenebot.geometry.look_rotation`) is
+:mod:`scenebot.geometry`'s.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 
+from scenebot.geometry import Intrinsics
+from scenebot.geometry import look_rotation as look_rotation  # re-exported (tests, benchmarks)
 from scenebot.scene.mesh import SceneMesh
-
-
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics in pixels."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @staticmethod
-    def from_hfov(width: int, height: int, hfov_deg: float) -> Intrinsics:
-        f = 0.5 * width / np.tan(np.radians(hfov_deg) / 2)
-        return Intrinsics(width, height, f, f, width / 2, height / 2)
-
-    @property
-    def K(self) -> np.ndarray:
-        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
-
-    def scaled(self, s: float) -> Intrinsics:
-        return Intrinsics(
-            round(self.width * s), round(self.height * s), self.fx * s, self.fy * s,
-            self.cx * s, self.cy * s,
-        )  # fmt: skip
-
-
-def look_rotation(heading: float, pitch: float = 0.0) -> np.ndarray:
-    """R_cam_from_world of a camera looking along ``heading`` (rad, CCW from +x), pitched up.
-
-    Returns:
-        (3, 3) rotation whose rows are the camera's x (right), y (down), z (forward) axes.
-    """
-    ch, sh, cp, sp = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(pitch)
-    fwd = np.array([cp * ch, cp * sh, sp])
-    right = np.array([sh, -ch, 0.0])
-    down = np.cross(fwd, right)
-    return np.stack([right, down, fwd])
 
 
 class _TextureAtlas:

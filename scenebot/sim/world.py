@@ -20,11 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from scenebot.config import SimConfig
+from scenebot.geometry import Intrinsics, look_rotation
 from scenebot.jpeg import write_jpeg
 from scenebot.robot.base import ULTRASONIC_NO_ECHO_CM, Pose2D, RobotError
 from scenebot.scene.mesh import SceneMesh
 from scenebot.sim.obstacles import ObstacleMap
-from scenebot.sim.renderer import Intrinsics, Renderer, look_rotation
+from scenebot.sim.renderer import Renderer
 
 
 class StartPoseError(RobotError):

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from scenebot.geometry import look_rotation as look_rotation  # re-exported (tests)
+
 # COLMAP model name -> how its params map onto (fx, fy, cx, cy, k1, k2, p1, p2)
 _MODELS = {
     "SIMPLE_PINHOLE": lambda p: (p[0], p[0], p[1], p[2], 0, 0, 0, 0),
@@ -106,21 +108,3 @@ class Camera:
         xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
         return np.stack([fx * xd + cx, fy * yd + cy], -1)
-
-
-def look_rotation(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
-    """cam_from_world rotation of a camera looking along ``heading`` (from +x towards +y).
-
-    Args:
-        heading_rad: viewing direction in the xy plane, radians.
-        pitch_rad: upward tilt, radians.
-
-    Returns:
-        (3, 3) rotation whose rows are the camera's x (right), y (down), z (forward) axes.
-    """
-    ch, sh = np.cos(heading_rad), np.sin(heading_rad)
-    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
-    fwd = np.array([cp * ch, cp * sh, sp])
-    right = np.array([sh, -ch, 0.0])
-    down = np.cross(fwd, right)
-    return np.stack([right, down, fwd])

@@ -21,7 +21,8 @@ import numpy as np
 from scipy.interpolate import splev, splprep
 from scipy.spatial import cKDTree
 
-from scenebot.tour.camera import TourInputError, look_rotation
+from scenebot.geometry import look_rotation
+from scenebot.tour.camera import TourInputError
 from scenebot.tour.config import PathConfig
 
 

@@ -20,6 +20,8 @@ import numpy as np
 import open3d as o3d
 import pycolmap
 
+from scenebot.dense.evaluate import sample_surface
+
 
 @dataclass
 class SyntheticView:
@@ -363,31 +365,6 @@ def make_dataset(
         rec.add_point3D(pts[p], track, np.array([128, 128, 128], dtype=np.uint8))
     rec.write_binary(str(out_dir / "sparse"))
     return rec, views
-
-
-def sample_surface(
-    vertices: np.ndarray, triangles: np.ndarray, n: int, seed: int = 0
-) -> np.ndarray:
-    """Area-uniform random points on a triangle mesh.
-
-    Args:
-        vertices: (V, 3) vertices, metres.
-        triangles: (T, 3) vertex indices.
-        n: number of points.
-        seed: random seed.
-
-    Returns:
-        (n, 3) float64 points, metres.
-    """
-    rng = np.random.default_rng(seed)
-    a, b, c = (vertices[triangles[:, k]] for k in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    tri = rng.choice(len(triangles), size=n, p=area / area.sum())
-    r1, r2 = rng.random(n), rng.random(n)
-    s1 = np.sqrt(r1)
-    return (
-        (1 - s1)[:, None] * a[tri] + (s1 * (1 - r2))[:, None] * b[tri] + (s1 * r2)[:, None] * c[tri]
-    )
 
 
 def intrinsics(width: int, height: int, focal_px: float | None = None) -> np.ndarray:

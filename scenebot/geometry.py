@@ -1,0 +1,150 @@
+"""Camera geometry shared by the simulator and every stage: intrinsics, camera rotations,
+camera poses of a map, the camera mount.
+
+Conventions (the simulator's renderer, the score stage's views and COLMAP alike): world frame
+in metres, z up, the robot's camera plane is z = 0 in a map; camera axes as in OpenCV/COLMAP
+(x right, y down, z forward); a pose is ``cam_from_world`` (R, t), a world point X maps to
+``R @ X + t`` in camera coordinates, the centre is ``C = -R^T t``; pixel (i, j) (row, column)
+has its centre at image coordinates (j + 0.5, i + 0.5) (COLMAP's convention), so the
+principal point of an ideal camera is (width / 2, height / 2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics (pixels).
+
+    Attributes:
+        width: image width (pixels).
+        height: image height (pixels).
+        fx: focal length along x (pixels).
+        fy: focal length along y (pixels).
+        cx: principal point x (pixels, image coordinates with pixel centres at +0.5).
+        cy: principal point y (pixels).
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @staticmethod
+    def from_hfov(width: int, height: int, hfov_deg: float) -> Intrinsics:
+        """Square-pixel intrinsics with a horizontal field of view (degrees), principal point
+        at the image centre."""
+        f = 0.5 * width / np.tan(np.deg2rad(hfov_deg) / 2)
+        return Intrinsics(width, height, f, f, width / 2, height / 2)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) calibration matrix."""
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
+
+    def scaled(self, width: int, height: int | None = None) -> Intrinsics:
+        """The same field of view at another resolution.
+
+        Args:
+            width: new width (pixels).
+            height: new height (pixels); default keeps the aspect ratio.
+
+        Returns:
+            The rescaled intrinsics.
+        """
+        sx = width / self.width
+        if height is None:
+            height = max(1, round(self.height * sx))
+        sy = height / self.height
+        return Intrinsics(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy)
+
+
+def look_rotation(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
+    """cam_from_world rotation of a camera looking along ``heading_rad`` (counter-clockwise
+    from world +x), tilted up by ``pitch_rad``, with no roll.
+
+    Returns:
+        (3, 3) rotation whose rows are the camera's x (right), y (down), z (forward) axes.
+    """
+    ch, sh = np.cos(heading_rad), np.sin(heading_rad)
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    fwd = np.array([cp * ch, cp * sh, sp])
+    right = np.array([sh, -ch, 0.0])
+    down = np.cross(fwd, right)
+    return np.stack([right, down, fwd])
+
+
+def planar_cam_from_world(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Rotation and translation of horizontal cameras at height z = 0 (``look_rotation`` with
+    no pitch, for many cameras at once).
+
+    Args:
+        x: (N,) camera centre x (m).
+        y: (N,) camera centre y (m).
+        theta: (N,) heading (rad).
+
+    Returns:
+        (N, 12) array: R row-major (9) then t (3), cam_from_world.
+    """
+    x, y, theta = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (x, y, theta))
+    c, s = np.cos(theta), np.sin(theta)
+    z0, one = np.zeros_like(c), np.ones_like(c)
+    # rows: x_cam (right) = (s, -c, 0); y_cam (down) = (0, 0, -1); z_cam (forward) = (c, s, 0)
+    R = np.stack([s, -c, z0, z0, z0, -one, c, s, z0], axis=1).reshape(-1, 3, 3)
+    C = np.stack([x, y, z0], axis=1)
+    t = -np.einsum("nij,nj->ni", R, C)
+    return np.concatenate([R.reshape(-1, 9), t], axis=1)
+
+
+def robot_xy_for_camera(
+    camera_xy: np.ndarray, heading: float, camera_offset_m: tuple[float, float]
+) -> np.ndarray:
+    """Where the robot's rotation axis is when its camera centre is at ``camera_xy``.
+
+    Args:
+        camera_xy: (2,) camera centre (m).
+        heading: robot heading (rad).
+        camera_offset_m: camera centre (forward, left) of the rotation axis (m).
+    """
+    fwd, left = camera_offset_m
+    c, s = np.cos(heading), np.sin(heading)
+    return np.asarray(camera_xy, float) - np.array([fwd * c - left * s, fwd * s + left * c])
+
+
+def read_map_geometry(sfm_dir: Path, with_headings: bool = False):
+    """3D points and camera centres of a COLMAP model.
+
+    Args:
+        sfm_dir: folder with cameras.bin, images.bin, points3D.bin.
+
+    Returns:
+        points (N, 3) m, camera centres (M, 3) m of the registered images and their names in
+        image-name order; with ``with_headings`` also (M,) headings (rad) of the optical axes.
+
+    Raises:
+        FileNotFoundError: the folder does not hold a COLMAP model.
+    """
+    import pycolmap
+
+    sfm_dir = Path(sfm_dir)
+    if not (sfm_dir / "images.bin").exists() and not (sfm_dir / "images.txt").exists():
+        raise FileNotFoundError(
+            f"{sfm_dir}: no COLMAP model (images.bin); run the sfm stage for this round first"
+        )
+    rec = pycolmap.Reconstruction(str(sfm_dir))
+    pts = np.array([p.xyz for p in rec.points3D.values()], float).reshape(-1, 3)
+    imgs = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
+    centres = np.array([im.projection_center() for im in imgs], float).reshape(-1, 3)
+    names = [im.name for im in imgs]
+    if not with_headings:
+        return pts, centres, names
+    fwd = [np.asarray(im.cam_from_world().rotation.matrix())[2] for im in imgs]
+    headings = np.array([np.arctan2(f[1], f[0]) for f in fwd], float)
+    return pts, centres, names, headings
