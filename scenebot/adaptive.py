@@ -42,9 +42,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from scenebot.capturelog import CaptureLog, map_fingerprint
+from scenebot.capturelog import CaptureLog, map_fingerprint, write_faults
 from scenebot.config import Config
-from scenebot.explore import write_faults
 from scenebot.geometry import read_map_geometry, robot_xy_for_camera
 from scenebot.robot.base import Pose2D, wrap_angle
 
@@ -277,10 +276,9 @@ def _run_adaptive(
     from scenebot.capturesession import (
         SESSION_LOG,
         finish_capture,
-        save_sim_state,
         session_record,
         start_capture,
-        stop_message,
+        stopping_safely,
     )
     from scenebot.follow import PathFollower
     from scenebot.localize import make_localizer
@@ -319,7 +317,6 @@ def _run_adaptive(
     initial = map_end_pose(prev / "sfm", cfg.camera_mount())
     truth = getattr(robot, "truth_record", None)
     session = capture_dir / SESSION_LOG
-    failing = False
     outcomes: list[dict] = []
     inliers: list[int] = []
     n_photos = 0
@@ -348,7 +345,7 @@ def _run_adaptive(
             robot, camera, localizer, planner, fcfg, capture_dir / "nav", clog,
             truth=truth, initial_pose=initial, trust_initial=False,
         )  # fmt: skip
-        try:
+        with stopping_safely(clog, robot, capture_dir, world, bar):
             follower.localize_now()  # where the robot really is, before the first path
 
             def go(goal: dict, path: dict | None, k: int):
@@ -384,16 +381,6 @@ def _run_adaptive(
 
             spare = unused_backups(goals_doc, paths) if acfg.replace_abandoned else []
             outcomes, n_photos = visit_goals(paths, spare, go, shoot, event, per_goal, budget)
-        except BaseException as exc:
-            failing = True
-            stop = stop_message(exc, clog, robot)
-            if stop is not None:
-                raise stop from None
-            raise
-        finally:
-            bar.close()
-            robot.stop()
-            save_sim_state(capture_dir, world, failing)
         summary = {
             "round": round_index,
             "photos": n_photos,

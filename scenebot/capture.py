@@ -5,7 +5,6 @@ describes (the lock, the archive of an earlier attempt, the log, the picture).
 
 from __future__ import annotations
 
-import contextlib
 import math
 from dataclasses import asdict
 from pathlib import Path
@@ -13,15 +12,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from scenebot.capturelog import CaptureLog, read_log
+from scenebot.capturelog import CaptureLog, read_log, write_faults
 from scenebot.capturesession import (
     SESSION_LOG,
     capture_lock,
     finish_capture,
-    save_sim_state,
     session_record,
     start_capture,
-    stop_message,
+    stopping_safely,
 )
 from scenebot.config import Config
 from scenebot.robot.factory import make_backend
@@ -39,7 +37,7 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
     Returns:
         The exploration summary (photos, bumps, stalls, circles) as a dict.
     """
-    from scenebot.explore import PhotoTaker, random_exploration, write_faults
+    from scenebot.explore import PhotoTaker, random_exploration
 
     capture_dir = Path(capture_dir)
     with capture_lock(capture_dir):
@@ -47,7 +45,6 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
         robot, camera, world = make_backend(cfg, capture_dir)
         session = capture_dir / SESSION_LOG
         rng = np.random.default_rng([cfg.seed, round_index])
-        failing = False
         with CaptureLog(session) as clog, robot:
             clog.write(
                 session_record(cfg, robot, world, round_index, {"world", "sim", "exploration"})
@@ -58,24 +55,12 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
                 robot, camera, clog, capture_dir, f"r{round_index:03d}",
                 on_photo=lambda n: bar.update(1),
             )  # fmt: skip
-            try:
+            with stopping_safely(clog, robot, capture_dir, world, bar):
                 result = random_exploration(robot, taker, clog, cfg.exploration, rng)
-            except BaseException as exc:
-                failing = True
-                with contextlib.suppress(Exception):  # best effort: the faults recovered so far
-                    write_faults(clog, robot)
-                stop = stop_message(exc, clog, robot)
-                if stop is not None:
-                    raise stop from None
-                raise
-            finally:
-                bar.close()
-                robot.stop()
-                save_sim_state(capture_dir, world, failing)
             summary = asdict(result)
             if world is not None:
                 summary["max_penetration_m"] = world.max_penetration_m
-            write_faults(clog, robot)
+            write_faults(clog, robot)  # the faults recovered after the last photo or event
             clog.write({"type": "end", "t": robot.now, "reason": "photo budget reached", **summary})
         finish_capture(capture_dir, lambda out, png: plot_trajectory(out, png, world))
     return summary

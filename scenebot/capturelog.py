@@ -159,3 +159,13 @@ def map_fingerprint(sfm_dir: Path) -> str:
     import hashlib
 
     return hashlib.sha1((Path(sfm_dir) / "images.bin").read_bytes()).hexdigest()
+
+
+def write_faults(log: CaptureLog, robot) -> None:
+    """Write the faults the robot recovered from since the last call as ``fault`` records
+    (``{"type": "fault", "t", "fault", "recovered", ...}``; backends without
+    ``drain_faults``, such as the simulator, have none)."""
+    drain = getattr(robot, "drain_faults", None)
+    if drain is not None:
+        for record in drain():
+            log.write(record)

@@ -37,7 +37,7 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from scenebot.capturelog import CaptureLog, LogWriteError
+from scenebot.capturelog import CaptureLog, LogWriteError, write_faults
 from scenebot.config import Config
 from scenebot.jpeg import PhotoWriteError, publish, space_left
 
@@ -289,6 +289,29 @@ def save_sim_state(capture_dir: Path, world, failing: bool) -> None:
             f"could not write {Path(capture_dir) / SIM_STATE}: {exc.strerror or exc} "
             f"({space_left(capture_dir)})"
         ) from None
+
+
+@contextlib.contextmanager
+def stopping_safely(clog: CaptureLog, robot, capture_dir: Path, world, bar) -> Iterator[None]:
+    """The body of a capture: on any way out the progress bar closes, the robot stops and the
+    simulator's state is saved; on an error the faults recovered so far are logged and a
+    known failure (a full disk, a lost link) becomes one clear message (:func:`stop_message`).
+    """
+    failing = False
+    try:
+        yield
+    except BaseException as exc:
+        failing = True
+        with contextlib.suppress(Exception):  # best effort: the faults recovered so far
+            write_faults(clog, robot)
+        stop = stop_message(exc, clog, robot)
+        if stop is not None:
+            raise stop from None
+        raise
+    finally:
+        bar.close()
+        robot.stop()
+        save_sim_state(capture_dir, world, failing)
 
 
 def finish_capture(

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.capturelog import CaptureLog
+from scenebot.capturelog import CaptureLog, write_faults
 from scenebot.config import ExplorationConfig
 from scenebot.robot.base import Camera, MotionResult, MotionStatus, Robot, SensorReading
 
@@ -28,16 +28,6 @@ class ExplorationResult:
     bumps: int
     stalls: int
     circles: int
-
-
-def write_faults(log: CaptureLog, robot: Robot) -> None:
-    """Write the faults the robot recovered from since the last call as ``fault`` records
-    (``{"type": "fault", "t", "fault", "recovered", ...}``; backends without
-    ``drain_faults``, such as the simulator, have none)."""
-    drain = getattr(robot, "drain_faults", None)
-    if drain is not None:
-        for record in drain():
-            log.write(record)
 
 
 class PhotoTaker:

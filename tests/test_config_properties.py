@@ -22,6 +22,7 @@ from scenebot.config import (
     SCHEMA_PATH,
     Config,
     ConfigError,
+    _model_of,
     normalize_config,
     validate_config,
 )
@@ -29,21 +30,12 @@ from scenebot.config import (
 SOURCE = "the workflow config (config.yaml and --config)"
 
 
-def _sub_model(annotation) -> type[BaseModel] | None:
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-        return annotation
-    for arg in getattr(annotation, "__args__", ()):
-        if isinstance(arg, type) and issubclass(arg, BaseModel):
-            return arg
-    return None
-
-
 def _keys(model: type[BaseModel] = Config, prefix: tuple = ()) -> list[tuple[str, ...]]:
     """Every key of the config, sections and settings, as paths."""
     out = []
     for name, field in model.model_fields.items():
         out.append((*prefix, name))
-        sub = _sub_model(field.annotation)
+        sub = _model_of(field.annotation)
         if sub is not None:
             out += _keys(sub, (*prefix, name))
     return out
@@ -78,7 +70,7 @@ def _nested(path: tuple[str, ...], value) -> dict:
     """``{path[0]: {path[1]: ... value}}``, with the required siblings of each section."""
     models = [Config]
     for part in path[:-1]:
-        models.append(_sub_model(models[-1].model_fields[part].annotation))
+        models.append(_model_of(models[-1].model_fields[part].annotation))
     data = value
     for part, model in zip(reversed(path), reversed(models), strict=True):
         data = {**_required(model), part: data}
