@@ -6,7 +6,9 @@ seen by those photos (the real mesh stage), decimated to ``score.max_triangles``
 are drawn in its free space as the score stage does. All rates are candidate evaluations per
 second (median of repeats, wall clock), measured in this run for both implementations; the
 "cpu" columns divide by the process CPU time instead (robust to other load on the machine:
-evals per CPU-second, i.e. per core). Run:
+evals per CPU-second, i.e. per core); "load" is the 1-minute load average when a figure's
+timed runs began and "cpu/wall" the process CPU time / wall time over them (about the cores
+in use: a figure compares with another run's only where these agree). Run:
 
     TI_SKIP_VERSION_CHECK=ON nice -n 10 .venv/bin/python benchmarks/bench_score.py [--quick]
 
@@ -81,23 +83,67 @@ def build_scene(rng: np.random.Generator):
     return Vm, Fm, R, t, K, fs
 
 
-def rate(fn, n: int, repeats: int) -> tuple[float, float]:
-    """Median wall and CPU evaluation rates (evals/s) of ``fn()`` which scores ``n`` views."""
-    walls, cpus = [], []
+def rate(fn, n: int, repeats: int) -> tuple[float, float, float, float]:
+    """Median wall and CPU evaluation rates (evals/s) of ``fn()`` which scores ``n`` views,
+    the 1-minute load average before the first call, and the median CPU time / wall time
+    (about the number of cores in use: compare runs only where these agree)."""
+    walls, cpus, ratios = [], [], []
+    load = os.getloadavg()[0]
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        walls.append(n / (time.perf_counter() - t0))
-        cpus.append(n / max(time.process_time() - c0, 1e-9))
-    return statistics.median(walls), statistics.median(cpus)
+        wall, cpu = time.perf_counter() - t0, max(time.process_time() - c0, 1e-9)
+        walls.append(n / wall)
+        cpus.append(n / cpu)
+        ratios.append(cpu / wall)
+    return statistics.median(walls), statistics.median(cpus), load, statistics.median(ratios)
 
 
-def scorers(V, F, R, t, K, w, h, S, batch, backend="cpu", reference=True):
+def scorers(V, F, R, t, K, w, h, S, batch, backend="cpu", reference=True, kernel=None):
+    """Taichi scorer (of ``kernel``, a module such as :func:`kernel_at` returns, default the
+    current one) and numpy reference scorer for the first S sources at w x h."""
     sv, size = source_views_for_depth(R[:S], t[:S], [K] * S, ScoreConfig().source_depth_width)
     intr = K.scaled(w, h)
-    tk = TaichiScorer(V, F, sv, size, intr, batch_size=batch, backend=backend)
+    cls = TaichiScorer if kernel is None else kernel.TaichiScorer
+    tk = cls(V, F, sv, size, intr, batch_size=batch, backend=backend)
     ref = ReferenceScorer(V, F, sv, size, intr) if reference else None
     return tk, ref
+
+
+def kernel_at(rev: str):
+    """The score kernel (``scenebot/score/kernel.py`` and ``_tikernels.py``) of git revision
+    ``rev``, imported beside the current one, so that both are timed in the same process.
+
+    The files are written to a temporary package whose ``kernel`` imports its own
+    ``_tikernels``; it shares the taichi runtime that :func:`init_taichi` started (call that
+    and build the current scorer first).
+    """
+    import importlib
+    import subprocess
+    import sys
+
+    import scenebot.score.kernel as current
+
+    root = Path(__file__).resolve().parent.parent
+    safe = "".join(c if c.isalnum() else "_" for c in rev)
+    pkg = f"score_kernel_{safe}"
+    if pkg + ".kernel" in sys.modules:
+        return sys.modules[pkg + ".kernel"]
+    folder = Path(tempfile.mkdtemp(prefix="scenebot_kernel_")) / pkg
+    folder.mkdir()
+    (folder / "__init__.py").write_text("")
+    for name in ("_tikernels.py", "kernel.py"):
+        text = subprocess.run(
+            ["git", "-C", str(root), "show", f"{rev}:scenebot/score/{name}"],
+            capture_output=True, text=True, check=True,
+        ).stdout  # fmt: skip
+        own = f"from {pkg} import _tikernels"
+        text = text.replace("from scenebot.score import _tikernels", own)
+        (folder / name).write_text(text)
+    sys.path.insert(0, str(folder.parent))
+    mod = importlib.import_module(pkg + ".kernel")
+    mod._TI_STATE.update(current._TI_STATE)  # the running taichi: do not start it again
+    return mod
 
 
 def save_scene(path: Path, V, F, R, t, K: Intrinsics, cands: np.ndarray) -> None:
@@ -149,8 +195,9 @@ def main() -> None:
 
     # --- scaling table (includes the acceptance point 80x60, 100 sources) -------------------
     head = (
-        f"{'res':>8} {'src':>4} | {'taichi/s':>9} {'cpu/s':>8} | {'numpy/s':>8} {'cpu/s':>7}"
-        f" | {'ratio':>6} {'cpu ratio':>9} | {'mean|d|deg':>10} {'max|d|':>7}"
+        f"{'res':>8} {'src':>4} | {'taichi/s':>9} {'cpu/s':>8} {'load':>5} {'cpu/wall':>8} "
+        f"| {'numpy/s':>8} {'cpu/s':>7} {'load':>5} {'cpu/wall':>8} "
+        f"| {'ratio':>6} {'cpu ratio':>9} | {'mean|d|deg':>10} {'max|d|':>7}"
     )
     print(head)
     print("-" * len(head))
@@ -160,21 +207,22 @@ def main() -> None:
                               not args.no_reference)  # fmt: skip
             tk.score(cands[: cfg.batch_size])  # compile
             n = n_tk if (w * h * S) <= 80 * 60 * 100 else n_tk // 2
-            tw, tc = rate(lambda n=n, tk=tk: tk.score(cands[:n]), n, reps)
+            tw, tc, tl, tr = rate(lambda n=n, tk=tk: tk.score(cands[:n]), n, reps)
             if ref is None:
-                print(f"{w:>4}x{h:<3} {S:>4} | {tw:9.0f} {tc:8.0f} |")
+                print(f"{w:>4}x{h:<3} {S:>4} | {tw:9.0f} {tc:8.0f} {tl:5.2f} {tr:8.2f} |")
                 continue
             # the reference on a subset sized to ~2 s of work at ~40 evals/s for 80x60/100
             m = int(np.clip(80 * (80 * 60 * 100) / (w * h * S), 4, 120))
             if args.quick:
                 m = max(4, m // 3)
-            nw, nc = rate(lambda m=m, ref=ref: ref.score(cands[:m]), m, 3)
+            nw, nc, nl, nr = rate(lambda m=m, ref=ref: ref.score(cands[:m]), m, 3)
             a = tk.score(cands[:m]).score_deg
             b = ref.score(cands[:m]).score_deg
             d = np.abs(a - b)
             print(
-                f"{w:>4}x{h:<3} {S:>4} | {tw:9.0f} {tc:8.0f} | {nw:8.1f} {nc:7.1f} | "
-                f"{tw / nw:6.1f} {tc / nc:9.1f} | {np.nanmean(d):10.4f} {np.nanmax(d):7.3f}"
+                f"{w:>4}x{h:<3} {S:>4} | {tw:9.0f} {tc:8.0f} {tl:5.2f} {tr:8.2f} "
+                f"| {nw:8.1f} {nc:7.1f} {nl:5.2f} {nr:8.2f} "
+                f"| {tw / nw:6.1f} {tc / nc:9.1f} | {np.nanmean(d):10.4f} {np.nanmax(d):7.3f}"
             )
     if V0 is None:
         return
@@ -184,7 +232,7 @@ def main() -> None:
         f"\ndecimation (80x60, 100 sources, {min(n_tk, 1000)} candidates; "
         "difference to the full-mesh scores)"
     )
-    head2 = f"{'triangles':>9} | {'taichi/s':>9} {'cpu/s':>8} | "
+    head2 = f"{'triangles':>9} | {'taichi/s':>9} {'cpu/s':>8} {'load':>5} {'cpu/wall':>8} | "
     head2 += f"{'mean|d|deg':>10} {'p95':>7} {'max':>7}"
     print(head2)
     print("-" * len(head2))
@@ -198,12 +246,12 @@ def main() -> None:
         )
         tk.score(cands[: cfg.batch_size])
         s = tk.score(cands[:nd]).score_deg
-        tw, tc = rate(lambda tk=tk: tk.score(cands[:nd]), nd, max(2, reps - 2))
+        tw, tc, tl, tr = rate(lambda tk=tk: tk.score(cands[:nd]), nd, max(2, reps - 2))
         if full is None:
             full = s
         d = np.abs(s - full)
         print(
-            f"{len(Fd):>9} | {tw:9.0f} {tc:8.0f} | {np.nanmean(d):10.4f} "
+            f"{len(Fd):>9} | {tw:9.0f} {tc:8.0f} {tl:5.2f} {tr:8.2f} | {np.nanmean(d):10.4f} "
             f"{np.nanpercentile(d, 95):7.3f} {np.nanmax(d):7.3f}"
         )
     print(f"\nload avg at the end: {os.getloadavg()}")

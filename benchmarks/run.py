@@ -2,13 +2,17 @@
 
     TI_SKIP_VERSION_CHECK=ON nice -n 10 .venv/bin/python benchmarks/run.py [--quick]
         [--only score,plan,...] [--sfm-full] [--arch auto|cpu] [--out benchmarks/results.md]
+        [--score-baseline REV]
 
 Prints a markdown table and writes it to ``benchmarks/results.md`` (and ``results.json``):
 one row per figure with the median of repeated runs, the reference measured in the same run
 (the numpy scorer, brute-force matching, scipy's Dijkstra, a plane sweep, a bare ray cast, a
 from-scratch SfM run, ...), their ratio (``x faster`` = reference time / this time: above 1
-the figure is faster than its reference), and the machine (CPU model, cores, memory, GPU,
-library versions, load average before and after).
+the figure is faster than its reference), the machine's state beside every figure and
+reference (1-minute load average, process CPU time / wall time), and the machine (CPU model,
+cores, memory, GPU, library versions, load average before and after). ``--score-baseline
+REV`` also times the score kernel of a git revision in the same run, interleaved with the
+current one.
 
 Groups (``--only``): ``machine`` (a numpy matrix product: a yardstick to compare machines),
 ``score``, ``localize``, ``plan``, ``sfm``, ``dense``, ``render`` (the simulator's photo),
@@ -76,6 +80,14 @@ class Row:
         reference: the same-run reference, or None.
         reference_median: its median, same unit, or None.
         note: anything that qualifies the figure (quality, rates, sizes).
+        load: 1-minute load average of the machine when the figure's timed runs started.
+        cpu_wall: process CPU time / wall time over the figure's timed runs (median): about
+            the number of busy cores (2 for a kernel that keeps both cores of the reference
+            machine busy; less when other work takes them).
+        reference_load, reference_cpu_wall: the same for the reference.
+        scope: ``"figure"`` when load and CPU/wall were taken around the figure's own timed
+            runs, ``"group"`` when :func:`main` filled them in for the whole group (setup
+            included).
     """
 
     group: str
@@ -86,6 +98,11 @@ class Row:
     reference: str | None = None
     reference_median: float | None = None
     note: str = ""
+    load: float | None = None
+    cpu_wall: float | None = None
+    reference_load: float | None = None
+    reference_cpu_wall: float | None = None
+    scope: str = "figure"
 
     @property
     def ratio(self) -> float | None:
@@ -114,6 +131,48 @@ def timed(fn: Callable[[], object], repeats: int, warmup: int = 0) -> tuple[floa
         out = fn()
         ts.append(time.perf_counter() - t0)
     return statistics.median(ts), out
+
+
+@dataclass
+class Timing:
+    """Medians of repeated timed calls and the machine's state while they ran.
+
+    Attributes:
+        median: median wall time of a call (s).
+        cpu_wall: median of process CPU time / wall time per call.
+        load: 1-minute load average before the first timed call.
+        repeats: timed calls.
+    """
+
+    median: float
+    cpu_wall: float
+    load: float
+    repeats: int
+
+
+def timed_cpu(
+    fns: dict[str, Callable[[], object]], repeats: int, warmup: int = 0
+) -> dict[str, Timing]:
+    """Time several functions in the same run, interleaved (call 1 of each, call 2 of each,
+    ...) so that other work on the machine weighs on all of them alike."""
+    for fn in fns.values():
+        for _ in range(warmup):
+            fn()
+    walls: dict[str, list[float]] = {k: [] for k in fns}
+    ratios: dict[str, list[float]] = {k: [] for k in fns}
+    loads: dict[str, float] = {}
+    for _ in range(repeats):
+        for k, fn in fns.items():
+            loads.setdefault(k, os.getloadavg()[0])
+            t0, c0 = time.perf_counter(), time.process_time()
+            fn()
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            walls[k].append(wall)
+            ratios[k].append(cpu / max(wall, 1e-12))
+    return {
+        k: Timing(statistics.median(walls[k]), statistics.median(ratios[k]), loads[k], repeats)
+        for k in fns
+    }
 
 
 def load_module(name: str, folder: Path = HERE):
@@ -206,8 +265,12 @@ def bench_machine(quick: bool) -> list[Row]:
 
 
 # --------------------------------------------------------------------------------- score
-def bench_score(quick: bool, arch: str = "cpu") -> list[Row]:
-    """Scoring speed at the acceptance point (80x60, 100 sources): taichi vs numpy."""
+def bench_score(quick: bool, arch: str = "cpu", baseline: str | None = None) -> list[Row]:
+    """Scoring speed at the acceptance point (80x60, 100 sources): taichi vs numpy.
+
+    ``baseline``: a git revision whose score kernel (``kernel.py``, ``_tikernels.py``) is
+    timed in the same run, interleaved with the current one, on the same candidates.
+    """
     import numpy as np
 
     bs = load_module("bench_score")
@@ -224,20 +287,39 @@ def bench_score(quick: bool, arch: str = "cpu") -> list[Row]:
     n = 400 if quick else 2000
     cands = sample_candidates(fs, n, rng, "bench")
     w, h, S = 80, 60, 100
-    tk, ref = bs.scorers(V, F, R, t, K, w, h, S, cfg.batch_size)
+    backend = "cpu" if got not in ("cuda", "vulkan") else "auto"
+    tk, ref = bs.scorers(V, F, R, t, K, w, h, S, cfg.batch_size, backend)
+    fns = {"taichi": lambda: tk.score(cands[:n])}
+    if baseline:
+        old, _ = bs.scorers(V, F, R, t, K, w, h, S, cfg.batch_size, backend, reference=False,
+                            kernel=bs.kernel_at(baseline))  # fmt: skip
+        fns["baseline"] = lambda: old.score(cands[:n])
     reps = 3 if quick else 5
-    t_tk, _ = timed(lambda: tk.score(cands[:n]), reps, warmup=1)
+    tim = timed_cpu(fns, reps, warmup=1)
     m = 12 if quick else 40
-    t_np, _ = timed(lambda: ref.score(cands[:m]), 3)
-    a, b = tk.score(cands[:m]).score_deg, ref.score(cands[:m]).score_deg
-    diff = float(np.nanmean(np.abs(a - b)))
-    per_tk, per_np = t_tk / n * 1e3, t_np / m * 1e3
-    return [
-        Row("score", f"score one candidate, {w}x{h} px, {S} sources, {len(F)} triangles "
-            f"(taichi {got}, batches of {n})", per_tk, "ms", reps, "numpy reference scorer",
-            per_np, f"{1e3 / per_tk:.0f} vs {1e3 / per_np:.1f} evals/s; mean |score diff| "
-            f"{diff:.4f} deg"),
-    ]  # fmt: skip
+    t_np = timed_cpu({"numpy": lambda: ref.score(cands[:m])}, 3)["numpy"]
+    b = ref.score(cands[:m]).score_deg
+    label = (f"score one candidate, {w}x{h} px, {S} sources, {len(F)} triangles "
+             f"(taichi {got}, {n} candidates in batches of {cfg.batch_size})")  # fmt: skip
+    rows = []
+    for k, scorer in (("taichi", tk), ("baseline", old if baseline else None)):
+        if k not in tim:
+            continue
+        a = scorer.score(cands[:m]).score_deg
+        diff = float(np.nanmean(np.abs(a - b)))
+        per = tim[k].median / n * 1e3
+        note = (f"{1e3 / per:.0f} vs {m / t_np.median:.1f} evals/s; mean |score diff| "
+                f"{diff:.4f} deg")  # fmt: skip
+        if k == "taichi" and baseline:
+            note += (f"; {tim['baseline'].median / tim['taichi'].median:.2f} x the kernel at "
+                     f"{baseline} (same run, interleaved)")  # fmt: skip
+        rows.append(Row(
+            "score", label if k == "taichi" else f"{label}, kernel at {baseline}", per, "ms",
+            reps, "numpy reference scorer", t_np.median / m * 1e3, note,
+            load=tim[k].load, cpu_wall=tim[k].cpu_wall, reference_load=t_np.load,
+            reference_cpu_wall=t_np.cpu_wall,
+        ))  # fmt: skip
+    return rows
 
 
 # ------------------------------------------------------------------------------ localize
@@ -572,22 +654,33 @@ def markdown(rows: list[Row], machine: dict, args_line: str, seconds: float) -> 
         f"{machine.get('load_avg_end')} (other work on the machine slows every figure).",
         "",
         "Medians of the repeats; `x faster` = reference time / this time (above 1: faster than "
-        "the reference measured in the same run).",
+        "the reference measured in the same run). `load` = the 1-minute load average when the "
+        "timed runs began and `CPU/wall` = process CPU time / wall time over them (about the "
+        "cores in use), for the figure and then its reference; in italics where they were "
+        "taken around the whole group (setup included) rather than the figure's own runs.",
         "",
-        "| group | measurement | median | reference (same run) | reference median | x faster "
-        "| repeats | note |",
-        "|---|---|---:|---|---:|---:|---:|---|",
+        "| group | measurement | median | load | CPU/wall | reference (same run) "
+        "| reference median | ref. load | ref. CPU/wall | x faster | repeats | note |",
+        "|---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---|",
     ]
 
     def cell(text: str | None) -> str:
         return (text or "-").replace("|", "\\|")
 
+    def state(x: float | None, scope: str) -> str:
+        if x is None or (isinstance(x, float) and math.isnan(x)):
+            return "-"
+        return f"*{x:.2f}*" if scope == "group" else f"{x:.2f}"
+
     for r in rows:
         ratio = r.ratio
+        ref_unit = " " + r.unit if r.reference_median is not None else ""
         lines.append(
-            f"| {r.group} | {cell(r.name)} | {_fmt(r.median)} {r.unit} | {cell(r.reference)} | "
-            f"{_fmt(r.reference_median)}{' ' + r.unit if r.reference_median is not None else ''}"
-            f" | {_fmt(ratio)} | {r.repeats} | {cell(r.note) if r.note else ''} |"
+            f"| {r.group} | {cell(r.name)} | {_fmt(r.median)} {r.unit} "
+            f"| {state(r.load, r.scope)} | {state(r.cpu_wall, r.scope)} | {cell(r.reference)} "
+            f"| {_fmt(r.reference_median)}{ref_unit} | {state(r.reference_load, r.scope)} "
+            f"| {state(r.reference_cpu_wall, r.scope)} | {_fmt(ratio)} | {r.repeats} "
+            f"| {cell(r.note) if r.note else ''} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -636,6 +729,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=HERE / "results.md",
                     help="markdown output (the JSON goes beside it)")  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
+    ap.add_argument("--score-baseline", metavar="REV",
+                    help="also time the score kernel of this git revision, same run")  # fmt: skip
     args = ap.parse_args(argv)
     only = set(args.only.split(",")) if args.only else None
     t_start = time.perf_counter()
@@ -643,8 +738,11 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[Row] = []
     failures: dict[str, str] = {}
     groups = discover(args.quick, args.arch, args.sfm_full, only)
+    if args.score_baseline and "score" in groups:
+        groups["score"] = lambda: bench_score(args.quick, args.arch, args.score_baseline)
     for name, fn in groups.items():
         t0 = time.perf_counter()
+        c0, load0 = time.process_time(), os.getloadavg()[0]
         print(f"[{time.strftime('%H:%M:%S')}] {name} ...", file=sys.stderr, flush=True)
         try:
             got = [_row(r, name) for r in fn()]
@@ -652,6 +750,12 @@ def main(argv: list[str] | None = None) -> int:
             failures[name] = f"{type(exc).__name__}: {exc}"
             traceback.print_exc()
             got = [Row(name, "FAILED", float("nan"), "s", 0, note=failures[name][:200])]
+        group_cpu_wall = (time.process_time() - c0) / max(time.perf_counter() - t0, 1e-9)
+        for r in got:
+            if r.load is None and r.cpu_wall is None:  # the group did not state its own
+                r.load, r.cpu_wall, r.scope = load0, group_cpu_wall, "group"
+                if r.reference_median is not None:
+                    r.reference_load, r.reference_cpu_wall = load0, group_cpu_wall
         rows += got
         print(f"    {name}: {len(got)} rows in {time.perf_counter() - t0:.0f} s",
               file=sys.stderr, flush=True)  # fmt: skip

@@ -3,15 +3,19 @@
 This module must not use ``from __future__ import annotations``: taichi reads the kernel
 argument annotations as objects. Kernels are defined at import and compiled at first call,
 after :func:`scenebot.score.kernel.init_taichi`.
+
+Two pipelines compute the same scores: the batched passes (:func:`raster`,
+:func:`tile_bounds`, :func:`cull`, :func:`angles`, :func:`view_sums`: a thread per chunk of
+triangles, tile or pixel row, for GPUs) and :func:`score_per_view` (every pass of a view on
+one thread, for CPUs; its functions end in ``_cpu`` or are only called from it).
 """
 
 import taichi as ti
 
 FAR = 1.0e30
 RASTER_CHUNK = 64  # triangles per parallel task of the rasterizer
-nd = ti.types.ndarray
-
-
+CLUSTER = 32  # consecutive triangles culled together by the per-view (CPU) rasterizer
+DMAX_BLOCK = 4  # pixels per side of the blocks of :func:`block_min_max`
 nd = ti.types.ndarray
 
 
@@ -93,29 +97,198 @@ def raster_range(
 ):
     """Rasterize triangles k0..k1-1 into view b, skipping those whose bounding sphere
     (``spheres`` (T, 4): centroid and radius, m) lies outside the view frustum."""
-    H = depth.shape[1]
-    W = depth.shape[2]
     R, t = view_rt(views, b)
     fx, fy, cx, cy = views[b, 15], views[b, 16], views[b, 17], views[b, 18]
-    # unit normals of the four side planes of the frustum (camera frame, inside >= 0)
-    nl = ti.Vector([fx, cx]).normalized()
-    nr = ti.Vector([-fx, W - cx]).normalized()
-    nt = ti.Vector([fy, cy]).normalized()
-    nb = ti.Vector([-fy, H - cy]).normalized()
+    sides = frustum_sides(fx, fy, cx, cy, depth.shape[2], depth.shape[1])
+    raster_tris(verts, tris, spheres, R, t, fx, fy, cx, cy, sides, depth, near, b, k0, k1, atomic)
+
+
+@ti.func
+def raster_tris(
+    verts: ti.template(),
+    tris: ti.template(),
+    spheres: ti.template(),
+    R: ti.template(),
+    t: ti.template(),
+    fx: ti.f32,
+    fy: ti.f32,
+    cx: ti.f32,
+    cy: ti.f32,
+    sides: ti.template(),
+    depth: ti.template(),
+    near: ti.f32,
+    b: ti.i32,
+    k0: ti.i32,
+    k1: ti.i32,
+    atomic: ti.template(),
+    one_div: ti.template() = False,
+):
+    """:func:`raster_range` for the camera (R, t, fx, fy, cx, cy) of view b, whose frustum
+    sides are ``sides`` (``one_div``: ``depth`` holds the largest 1 / z, and the triangles
+    wholly beyond the near plane go to :func:`raster_triangle_one_div`)."""
     for k in range(k0, k1):
         sc = R @ ti.Vector([spheres[k, 0], spheres[k, 1], spheres[k, 2]]) + t
-        rad = spheres[k, 3]
-        cut = sc.z < near - rad
-        cut |= nl[0] * sc.x + nl[1] * sc.z < -rad
-        cut |= nr[0] * sc.x + nr[1] * sc.z < -rad
-        cut |= nt[0] * sc.y + nt[1] * sc.z < -rad
-        cut |= nb[0] * sc.y + nb[1] * sc.z < -rad
-        if not cut:
+        if not sphere_outside(sc, spheres[k, 3], near, sides):
             i0, i1, i2 = tris[k, 0], tris[k, 1], tris[k, 2]
             a = R @ ti.Vector([verts[i0, 0], verts[i0, 1], verts[i0, 2]]) + t
             bb = R @ ti.Vector([verts[i1, 0], verts[i1, 1], verts[i1, 2]]) + t
             c = R @ ti.Vector([verts[i2, 0], verts[i2, 1], verts[i2, 2]]) + t
-            raster_triangle(a, bb, c, b, fx, fy, cx, cy, depth, near, atomic)
+            if ti.static(one_div):
+                if ti.min(a.z, bb.z, c.z) > near:
+                    raster_triangle_one_div(a, bb, c, b, fx, fy, cx, cy, depth)
+                else:
+                    raster_triangle(a, bb, c, b, fx, fy, cx, cy, depth, near, False, True)
+            else:
+                raster_triangle(a, bb, c, b, fx, fy, cx, cy, depth, near, atomic)
+
+
+@ti.func
+def raster_triangle_one_div(
+    a: ti.template(),
+    bb: ti.template(),
+    c: ti.template(),
+    b: ti.i32,
+    fx: ti.f32,
+    fy: ti.f32,
+    cx: ti.f32,
+    cy: ti.f32,
+    depth: ti.template(),
+):
+    """:func:`raster_triangle` for a triangle wholly beyond the near plane into a buffer of
+    the largest 1 / z (:func:`raster_view`): the same edge functions and inside test, and
+    1 / z = sum(e_k q_k) of the unnormalised edge functions e_k with q_k = 1 / (z_k area),
+    so that a covered pixel costs no division (taichi's fast math turns multiplications by
+    a reciprocal into divisions, hence the select that hides them)."""
+    H = depth.shape[1]
+    W = depth.shape[2]
+    u0, v0 = fx * a.x / a.z + cx, fy * a.y / a.z + cy
+    u1, v1 = fx * bb.x / bb.z + cx, fy * bb.y / bb.z + cy
+    u2, v2 = fx * c.x / c.z + cx, fy * c.y / c.z + cy
+    area = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
+    if ti.abs(area) > 1e-12:
+        inv_area = 1.0 / area
+        ja = ti.max(0, ti.cast(ti.ceil(ti.min(v0, v1, v2) - 0.5), ti.i32))
+        jb = ti.min(H - 1, ti.cast(ti.floor(ti.max(v0, v1, v2) - 0.5), ti.i32))
+        ia = ti.max(0, ti.cast(ti.ceil(ti.min(u0, u1, u2) - 0.5), ti.i32))
+        ib = ti.min(W - 1, ti.cast(ti.floor(ti.max(u0, u1, u2) - 0.5), ti.i32))
+        q0 = ti.select(area != 0.0, inv_area / a.z, 0.0)
+        q1 = ti.select(area != 0.0, inv_area / bb.z, 0.0)
+        q2 = ti.select(area != 0.0, inv_area / c.z, 0.0)
+        inv_a = ti.select(area != 0.0, inv_area, 0.0)
+        eps = -1e-5
+        for j in range(ja, jb + 1):
+            pv = j + 0.5
+            dv0, dv1, dv2 = v0 - pv, v1 - pv, v2 - pv
+            for i in range(ia, ib + 1):
+                pu = i + 0.5
+                e0 = (u1 - pu) * dv2 - (u2 - pu) * dv1
+                e1 = (u2 - pu) * dv0 - (u0 - pu) * dv2
+                w0 = e0 * inv_a
+                w1 = e1 * inv_a
+                # no branch: a triangle's edges would mispredict one every few pixels
+                inside = (w0 >= eps) & (w1 >= eps) & (1.0 - w0 - w1 >= eps)
+                s = e0 * q0 + e1 * q1 + (area - e0 - e1) * q2
+                d = depth[b, j, i]
+                depth[b, j, i] = ti.select(inside & (s > d), s, d)
+
+
+@ti.func
+def task_view(task: ti.i32, n: ti.i32, n_tasks: ti.i32) -> ti.i32:
+    """The view (0..n-1) that parallel task ``task`` of ``n_tasks`` (>= n) starts, or -1.
+
+    Taichi splits a CPU range-for into one contiguous block per thread of at least 512
+    iterations, so a loop over a few hundred views would run on one thread: the per-view
+    kernels loop over ``n_tasks = max(n, 512 * threads)`` tasks instead, view b in the first
+    of its ``n_tasks / n`` tasks, so that every thread gets an equal share of the views.
+    """
+    b = -1
+    first = (task * n) // n_tasks
+    if n > 0 and (task == 0 or ((task - 1) * n) // n_tasks != first):
+        b = first
+    return b
+
+
+@ti.func
+def raster_view(
+    verts: ti.template(),
+    tris: ti.template(),
+    spheres: ti.template(),
+    clusters: ti.template(),
+    views: ti.template(),
+    depth: ti.template(),
+    near: ti.f32,
+    b: ti.i32,
+):
+    """The whole z-buffer of view b, by one thread. Clusters of CLUSTER consecutive
+    triangles are culled first by their bounding sphere (``clusters`` (C, 4): centre and
+    radius, m, enclosing the triangles' own spheres, so that a cluster outside the frustum
+    holds no triangle that the per-triangle test keeps). The buffer holds the largest 1 / z
+    while the triangles are drawn (no division per covered pixel), then its reciprocal
+    (``FAR`` where nothing was drawn): the least z, as the plain z-buffer, since the
+    correctly rounded reciprocal is monotonic."""
+    for j, i in ti.ndrange(depth.shape[1], depth.shape[2]):
+        depth[b, j, i] = 0.0  # largest 1 / z so far: nothing
+    R, t = view_rt(views, b)
+    fx, fy, cx, cy = views[b, 15], views[b, 16], views[b, 17], views[b, 18]
+    sides = frustum_sides(fx, fy, cx, cy, depth.shape[2], depth.shape[1])
+    T = tris.shape[0]
+    for c in range(clusters.shape[0]):
+        cc = R @ ti.Vector([clusters[c, 0], clusters[c, 1], clusters[c, 2]]) + t
+        if not sphere_outside(cc, clusters[c, 3], near, sides):
+            k0 = c * CLUSTER
+            k1 = ti.min(T, k0 + CLUSTER)
+            raster_tris(
+                verts, tris, spheres, R, t, fx, fy, cx, cy, sides, depth, near, b, k0, k1,
+                False, True,
+            )  # fmt: skip
+    # 1 / max(1 / z) = min(z) exactly: the division is monotonic
+    for j, i in ti.ndrange(depth.shape[1], depth.shape[2]):
+        s = depth[b, j, i]
+        depth[b, j, i] = ti.select(s > 0.0, 1.0 / s, FAR)
+
+
+@ti.kernel
+def raster_clustered(
+    verts: nd(dtype=ti.f32, ndim=2),
+    tris: nd(dtype=ti.i32, ndim=2),
+    spheres: nd(dtype=ti.f32, ndim=2),
+    clusters: nd(dtype=ti.f32, ndim=2),
+    views: nd(dtype=ti.f32, ndim=2),
+    depth: nd(dtype=ti.f32, ndim=3),
+    n: ti.i32,
+    n_tasks: ti.i32,
+    near: ti.f32,
+):
+    """Z-buffers of views 0..n-1 (filled here: no FAR needed beforehand), one thread per
+    view (see :func:`task_view` for ``n_tasks``), triangles culled by cluster
+    (:func:`raster_view`): for CPUs."""
+    for task in range(n_tasks):
+        b = task_view(task, n, n_tasks)
+        if b >= 0:
+            raster_view(verts, tris, spheres, clusters, views, depth, near, b)
+
+
+@ti.func
+def frustum_sides(fx: ti.f32, fy: ti.f32, cx: ti.f32, cy: ti.f32, W: ti.i32, H: ti.i32):
+    """Unit normals of the four side planes of a view frustum (camera frame, inside >= 0),
+    as the rows (left, right, top, bottom) of a 4x2 matrix."""
+    nl = ti.Vector([fx, cx]).normalized()
+    nr = ti.Vector([-fx, W - cx]).normalized()
+    nt = ti.Vector([fy, cy]).normalized()
+    nb = ti.Vector([-fy, H - cy]).normalized()
+    return ti.Matrix.rows([nl, nr, nt, nb])
+
+
+@ti.func
+def sphere_outside(sc: ti.template(), rad: ti.f32, near: ti.f32, sides: ti.template()) -> bool:
+    """Whether a sphere (camera-frame centre ``sc``, radius ``rad``, m) lies wholly outside
+    the frustum whose side normals are ``sides`` (:func:`frustum_sides`) or before ``near``."""
+    cut = sc.z < near - rad
+    cut |= sides[0, 0] * sc.x + sides[0, 1] * sc.z < -rad
+    cut |= sides[1, 0] * sc.x + sides[1, 1] * sc.z < -rad
+    cut |= sides[2, 0] * sc.y + sides[2, 1] * sc.z < -rad
+    cut |= sides[3, 0] * sc.y + sides[3, 1] * sc.z < -rad
+    return cut
 
 
 @ti.func
@@ -131,9 +304,11 @@ def raster_triangle(
     depth: ti.template(),
     near: ti.f32,
     atomic: ti.template(),
+    inverse: ti.template() = False,
 ):
     """Write one camera-frame triangle into the z-buffer of view ``b`` (with atomic writes
-    when other threads may write the same view).
+    when other threads may write the same view; ``inverse``: ``depth`` holds the largest
+    1 / z instead, see :func:`raster_view`).
 
     A triangle wholly beyond the near plane is rasterized with screen-space edge functions
     (pixel centres inside or on an edge; depth from the perspective-correct interpolation of
@@ -167,6 +342,8 @@ def raster_triangle(
                         z = 1.0 / (w0 * iz0 + w1 * iz1 + w2 * iz2)
                         if ti.static(atomic):
                             ti.atomic_min(depth[b, j, i], z)
+                        elif ti.static(inverse):
+                            depth[b, j, i] = ti.max(depth[b, j, i], 1.0 / z)
                         else:
                             depth[b, j, i] = ti.min(depth[b, j, i], z)
     elif ti.max(a.z, bb.z, c.z) > near:
@@ -217,17 +394,64 @@ def raster_triangle(
                     if u >= -1e-6 and v >= -1e-6 and u + v <= 1.0 + 1e-6 and z > near:
                         if ti.static(atomic):
                             ti.atomic_min(depth[b, j, i], z)
+                        elif ti.static(inverse):
+                            depth[b, j, i] = ti.max(depth[b, j, i], 1.0 / z)
                         else:
                             depth[b, j, i] = ti.min(depth[b, j, i], z)
 
 
 @ti.func
-def pixel_point(views: ti.template(), b: ti.i32, j: ti.i32, i: ti.i32, z: ti.f32):
-    """World point (m) of pixel (j, i) of view b at z-depth z."""
+def view_camera(views: ti.template(), b: ti.i32):
+    """Camera of view b: rotation R, translation t (cam_from_world), centre L (m) and
+    intrinsics (fx, fy, cx, cy), loaded once for all of the view's pixels."""
     R, t = view_rt(views, b)
-    fx, fy, cx, cy = views[b, 15], views[b, 16], views[b, 17], views[b, 18]
-    pc = ti.Vector([(i + 0.5 - cx) / fx * z, (j + 0.5 - cy) / fy * z, z])
+    L = ti.Vector([views[b, 12], views[b, 13], views[b, 14]])
+    K = ti.Vector([views[b, 15], views[b, 16], views[b, 17], views[b, 18]])
+    return R, t, L, K
+
+
+@ti.func
+def pixel_point(R: ti.template(), t: ti.template(), K: ti.template(), j, i, z):
+    """World point (m) of pixel (j, i) at z-depth z of the camera (R, t, K = fx, fy, cx, cy)."""
+    pc = ti.Vector([(i + 0.5 - K[2]) / K[0] * z, (j + 0.5 - K[3]) / K[1] * z, z])
     return R.transpose() @ (pc - t)
+
+
+@ti.func
+def tile_bound(
+    depth: ti.template(),
+    R: ti.template(),
+    t: ti.template(),
+    K: ti.template(),
+    b: ti.i32,
+    k: ti.i32,
+    tiles_x: ti.i32,
+    tiles_y: ti.i32,
+    bounds: ti.template(),
+):
+    """Bounds of the hit points of tile k of view b (see :func:`tile_bounds`)."""
+    H = depth.shape[1]
+    W = depth.shape[2]
+    kx = k % tiles_x
+    ky = k // tiles_x
+    lo = ti.Vector([FAR, FAR, FAR])
+    hi = ti.Vector([-FAR, -FAR, -FAR])
+    acc = ti.Vector([0.0, 0.0, 0.0])
+    n = 0
+    for j in range((ky * H + tiles_y - 1) // tiles_y, ((ky + 1) * H + tiles_y - 1) // tiles_y):
+        for i in range((kx * W + tiles_x - 1) // tiles_x, ((kx + 1) * W + tiles_x - 1) // tiles_x):
+            z = depth[b, j, i]
+            if z < FAR:
+                P = pixel_point(R, t, K, j, i, z)
+                lo = ti.min(lo, P)
+                hi = ti.max(hi, P)
+                acc += P
+                n += 1
+    acc /= ti.max(n, 1)
+    for c in ti.static(range(3)):
+        bounds[b, k, c] = lo[c]
+        bounds[b, k, c + 3] = hi[c]
+        bounds[b, k, c + 6] = acc[c]
 
 
 @ti.kernel
@@ -244,31 +468,55 @@ def tile_bounds(
     Tile (kx, ky) holds the pixels with ``(i * tiles_x) // W == kx`` and
     ``(j * tiles_y) // H == ky``; its index is ``kx + tiles_x * ky``.
     """
-    H = depth.shape[1]
-    W = depth.shape[2]
     for b, k in ti.ndrange(bounds.shape[0], bounds.shape[1]):
-        kx = k % tiles_x
-        ky = k // tiles_x
-        lo = ti.Vector([FAR, FAR, FAR])
-        hi = ti.Vector([-FAR, -FAR, -FAR])
-        acc = ti.Vector([0.0, 0.0, 0.0])
-        n = 0
-        for j in range((ky * H + tiles_y - 1) // tiles_y, ((ky + 1) * H + tiles_y - 1) // tiles_y):
-            for i in range(
-                (kx * W + tiles_x - 1) // tiles_x, ((kx + 1) * W + tiles_x - 1) // tiles_x
-            ):
-                z = depth[b, j, i]
-                if z < FAR:
-                    P = pixel_point(views, b, j, i, z)
-                    lo = ti.min(lo, P)
-                    hi = ti.max(hi, P)
-                    acc += P
-                    n += 1
-        acc /= ti.max(n, 1)
-        for c in ti.static(range(3)):
-            bounds[b, k, c] = lo[c]
-            bounds[b, k, c + 3] = hi[c]
-            bounds[b, k, c + 6] = acc[c]
+        R, t, _, K = view_camera(views, b)
+        tile_bound(depth, R, t, K, b, k, tiles_x, tiles_y, bounds)
+
+
+@ti.func
+def cull_tile(
+    bounds: ti.template(),
+    L: ti.template(),
+    src_centres: ti.template(),
+    planes: ti.template(),
+    lists: ti.template(),
+    keys: ti.template(),
+    n_active: ti.template(),
+    b: ti.i32,
+    k: ti.i32,
+):
+    """Sorted source list of tile k of view b, camera centre L (see :func:`cull`)."""
+    n = 0
+    if bounds[b, k, 0] <= bounds[b, k, 3]:
+        Pm = ti.Vector([bounds[b, k, 6], bounds[b, k, 7], bounds[b, k, 8]])
+        lo = ti.Vector([bounds[b, k, 0], bounds[b, k, 1], bounds[b, k, 2]])
+        hi = ti.Vector([bounds[b, k, 3], bounds[b, k, 4], bounds[b, k, 5]])
+        rho = ti.max(hi - Pm, Pm - lo).norm() * 1.001 + 1e-5
+        r = (L - Pm).normalized()
+        d_cam = deviation(rho, (L - Pm).norm())
+        for s in range(src_centres.shape[0]):
+            inside = True
+            for p in ti.static(range(5)):
+                w = ti.Vector([planes[s, p, 0], planes[s, p, 1], planes[s, p, 2]])
+                # the box corner farthest along the plane normal
+                far_corner = ti.select(w > 0, hi, lo)
+                if w.dot(far_corner) + planes[s, p, 3] < 0:
+                    inside = False
+            if inside:
+                ds = src_centres[s] - Pm
+                cos_m = ti.min(1.0, ti.max(-1.0, r.dot(ds.normalized())))
+                key = ti.acos(cos_m) - d_cam - deviation(rho, ds.norm()) - 1e-4
+                m = n
+                while m > 0 and keys[b, k, m - 1] > key:
+                    lists[b, k, m] = lists[b, k, m - 1]
+                    keys[b, k, m] = keys[b, k, m - 1]
+                    m -= 1
+                lists[b, k, m] = s
+                keys[b, k, m] = key
+                n += 1
+        for m in range(n):
+            keys[b, k, m] = ti.cos(ti.min(ti.max(keys[b, k, m], 0.0), 3.14159265))
+    n_active[b, k] = n
 
 
 @ti.kernel
@@ -293,38 +541,8 @@ def cull(
     rho >= |X - Pm|), hence theta_i(P) >= theta_i(Pm) - delta(L) - delta(L_i).
     """
     for b, k in ti.ndrange(bounds.shape[0], bounds.shape[1]):
-        n = 0
-        if bounds[b, k, 0] <= bounds[b, k, 3]:
-            L = ti.Vector([views[b, 12], views[b, 13], views[b, 14]])
-            Pm = ti.Vector([bounds[b, k, 6], bounds[b, k, 7], bounds[b, k, 8]])
-            lo = ti.Vector([bounds[b, k, 0], bounds[b, k, 1], bounds[b, k, 2]])
-            hi = ti.Vector([bounds[b, k, 3], bounds[b, k, 4], bounds[b, k, 5]])
-            rho = ti.max(hi - Pm, Pm - lo).norm() * 1.001 + 1e-5
-            r = (L - Pm).normalized()
-            d_cam = deviation(rho, (L - Pm).norm())
-            for s in range(src_centres.shape[0]):
-                inside = True
-                for p in ti.static(range(5)):
-                    w = ti.Vector([planes[s, p, 0], planes[s, p, 1], planes[s, p, 2]])
-                    # the box corner farthest along the plane normal
-                    far_corner = ti.select(w > 0, hi, lo)
-                    if w.dot(far_corner) + planes[s, p, 3] < 0:
-                        inside = False
-                if inside:
-                    ds = src_centres[s] - Pm
-                    cos_m = ti.min(1.0, ti.max(-1.0, r.dot(ds.normalized())))
-                    key = ti.acos(cos_m) - d_cam - deviation(rho, ds.norm()) - 1e-4
-                    m = n
-                    while m > 0 and keys[b, k, m - 1] > key:
-                        lists[b, k, m] = lists[b, k, m - 1]
-                        keys[b, k, m] = keys[b, k, m - 1]
-                        m -= 1
-                    lists[b, k, m] = s
-                    keys[b, k, m] = key
-                    n += 1
-            for m in range(n):
-                keys[b, k, m] = ti.cos(ti.min(ti.max(keys[b, k, m], 0.0), 3.14159265))
-        n_active[b, k] = n
+        L = ti.Vector([views[b, 12], views[b, 13], views[b, 14]])
+        cull_tile(bounds, L, src_centres, planes, lists, keys, n_active, b, k)
 
 
 @ti.func
@@ -377,6 +595,143 @@ def sees(
 
 
 @ti.kernel
+def neighbourhood_max(depth: nd(dtype=ti.f32, ndim=3), out: nd(dtype=ti.f32, ndim=3)):
+    """``out[s, y, x]``: the largest of ``depth[s]`` at (y, x), (y, x + 1), (y + 1, x) and
+    (y + 1, x + 1), indices clamped to the image (the 2x2 neighbourhood of :func:`sees`)."""
+    Hs = depth.shape[1]
+    Ws = depth.shape[2]
+    for s, y0, x0 in ti.ndrange(depth.shape[0], Hs, Ws):
+        x1 = ti.min(Ws - 1, x0 + 1)
+        y1 = ti.min(Hs - 1, y0 + 1)
+        out[s, y0, x0] = ti.max(
+            ti.max(depth[s, y0, x0], depth[s, y0, x1]),
+            ti.max(depth[s, y1, x0], depth[s, y1, x1]),
+        )
+
+
+@ti.kernel
+def block_min_max(dmax: nd(dtype=ti.f32, ndim=3), out: nd(dtype=ti.math.vec2, ndim=3)):
+    """``out[s, by, bx]``: the least and the largest of ``dmax[s]`` over the block of
+    DMAX_BLOCK x DMAX_BLOCK pixels (by, bx) (clipped to the image)."""
+    Hs = dmax.shape[1]
+    Ws = dmax.shape[2]
+    for s, by, bx in ti.ndrange(out.shape[0], out.shape[1], out.shape[2]):
+        lo = FAR * 4.0
+        hi = -FAR
+        for y in range(by * DMAX_BLOCK, ti.min(Hs, (by + 1) * DMAX_BLOCK)):
+            for x in range(bx * DMAX_BLOCK, ti.min(Ws, (bx + 1) * DMAX_BLOCK)):
+                lo = ti.min(lo, dmax[s, y, x])
+                hi = ti.max(hi, dmax[s, y, x])
+        out[s, by, bx] = ti.Vector([lo, hi])
+
+
+@ti.func
+def sees_max(
+    src_proj: ti.template(),
+    src_dmax: ti.template(),
+    src_mm: ti.template(),
+    s: ti.i32,
+    P: ti.template(),
+    tol: ti.f32,
+    near: ti.f32,
+) -> bool:
+    """:func:`sees` reading the 2x2 maximum of :func:`neighbourhood_max` (one load, the same
+    value), and only where the least and largest of them over its block (``src_mm``,
+    :func:`block_min_max`, 16 times smaller, so mostly in cache) do not decide already."""
+    Hs = src_dmax.shape[1]
+    Ws = src_dmax.shape[2]
+    ok = False
+    qz = src_proj[s, 8] * P.x + src_proj[s, 9] * P.y + src_proj[s, 10] * P.z + src_proj[s, 11]
+    u = -1.0
+    v = -1.0
+    if qz > near:
+        u = (
+            src_proj[s, 0] * P.x + src_proj[s, 1] * P.y + src_proj[s, 2] * P.z + src_proj[s, 3]
+        ) / qz
+    if u >= 0.0 and u < Ws:
+        v = (
+            src_proj[s, 4] * P.x + src_proj[s, 5] * P.y + src_proj[s, 6] * P.z + src_proj[s, 7]
+        ) / qz
+    if v >= 0.0 and v < Hs:
+        x0 = ti.max(0, ti.cast(ti.floor(u - 0.5), ti.i32))
+        y0 = ti.max(0, ti.cast(ti.floor(v - 0.5), ti.i32))
+        # the block's least and largest 2x2 maxima decide most points without the full map
+        mm = src_mm[s, y0 // DMAX_BLOCK, x0 // DMAX_BLOCK]
+        if qz <= mm[0] * (1.0 + tol):
+            ok = True
+        elif qz <= mm[1] * (1.0 + tol):
+            ok = qz <= src_dmax[s, y0, x0] * (1.0 + tol)
+    return ok
+
+
+@ti.func
+def angle_row(
+    depth: ti.template(),
+    R: ti.template(),
+    t: ti.template(),
+    L: ti.template(),
+    K: ti.template(),
+    src_proj: ti.template(),
+    src_centres: ti.template(),
+    src_depth: ti.template(),
+    tiles_x: ti.i32,
+    tiles_y: ti.i32,
+    lists: ti.template(),
+    keys: ti.template(),
+    n_active: ti.template(),
+    tol: ti.f32,
+    near: ti.f32,
+    pix: ti.template(),
+    b: ti.i32,
+    j: ti.i32,
+):
+    """Pixel scores of row j of view b (see :func:`angles`)."""
+    H = depth.shape[1]
+    W = depth.shape[2]
+    hint = -1
+    for i in range(W):
+        z = depth[b, j, i]
+        out = -1.0
+        if z < FAR:
+            P = pixel_point(R, t, K, j, i, z)
+            r = (L - P).normalized()
+            kt = (i * tiles_x) // W + tiles_x * ((j * tiles_y) // H)
+            best = -2.0  # cosine of the best angle so far; -2 = no source sees P yet
+            best_s = -1
+            # nested ifs: taichi's `and` does not short-circuit (hint = -1 must not be read)
+            if hint >= 0:  # noqa: SIM102
+                if sees(src_proj, src_depth, hint, P, tol, near):
+                    d = src_centres[hint] - P
+                    best = r.dot(d) / ti.sqrt(d.dot(d) + 1e-30)
+                    best_s = hint
+            bsq = best * best
+            for m in range(n_active[b, kt]):
+                if keys[b, kt, m] <= best:
+                    break  # no later source of this tile can beat the best angle
+                s = lists[b, kt, m]
+                d = src_centres[s] - P
+                dt = r.dot(d)
+                n2 = d.dot(d)
+                # "cos(angle) > best" without a square root or a division
+                better = False
+                if best >= 0.0:
+                    better = dt > 0.0 and dt * dt > bsq * n2
+                else:
+                    better = dt >= 0.0 or dt * dt < bsq * n2
+                if better and s != best_s:  # noqa: SIM102 (sees() is costly: only if better)
+                    if sees(src_proj, src_depth, s, P, tol, near):
+                        best = dt / ti.sqrt(n2 + 1e-30)
+                        bsq = best * best
+                        best_s = s
+            if best < -1.5:
+                out = 180.0
+            else:
+                out = ti.acos(ti.min(1.0, ti.max(-1.0, best))) * 57.29577951308232
+            hint = best_s
+        pix[b, j, i] = out
+
+
+@ti.kernel
 def angles(
     depth: nd(dtype=ti.f32, ndim=3),
     views: nd(dtype=ti.f32, ndim=2),
@@ -398,67 +753,440 @@ def angles(
     angle is tried first (a visible source's angle is an upper bound of the minimum, so the
     search below stops earlier); the result is the exact minimum either way.
     """
-    H = depth.shape[1]
-    W = depth.shape[2]
-    for b, j in ti.ndrange(depth.shape[0], H):
-        L = ti.Vector([views[b, 12], views[b, 13], views[b, 14]])
-        hint = -1
-        for i in range(W):
-            z = depth[b, j, i]
-            out = -1.0
-            if z < FAR:
-                P = pixel_point(views, b, j, i, z)
-                r = (L - P).normalized()
-                kt = (i * tiles_x) // W + tiles_x * ((j * tiles_y) // H)
-                best = -2.0  # cosine of the best angle so far; -2 = no source sees P yet
-                best_s = -1
-                # nested ifs: taichi's `and` does not short-circuit (hint = -1 must not be read)
-                if hint >= 0:  # noqa: SIM102
-                    if sees(src_proj, src_depth, hint, P, tol, near):
-                        d = src_centres[hint] - P
-                        best = r.dot(d) / ti.sqrt(d.dot(d) + 1e-30)
-                        best_s = hint
-                bsq = best * best
-                for m in range(n_active[b, kt]):
-                    if keys[b, kt, m] <= best:
-                        break  # no later source of this tile can beat the best angle
-                    s = lists[b, kt, m]
-                    d = src_centres[s] - P
-                    dt = r.dot(d)
-                    n2 = d.dot(d)
-                    # "cos(angle) > best" without a square root or a division
-                    better = False
-                    if best >= 0.0:
-                        better = dt > 0.0 and dt * dt > bsq * n2
-                    else:
-                        better = dt >= 0.0 or dt * dt < bsq * n2
-                    if better and s != best_s:  # noqa: SIM102 (sees() is costly: only if better)
-                        if sees(src_proj, src_depth, s, P, tol, near):
-                            best = dt / ti.sqrt(n2 + 1e-30)
-                            bsq = best * best
-                            best_s = s
-                if best < -1.5:
-                    out = 180.0
-                else:
-                    out = ti.acos(ti.min(1.0, ti.max(-1.0, best))) * 57.29577951308232
-                hint = best_s
-            pix[b, j, i] = out
+    for b, j in ti.ndrange(depth.shape[0], depth.shape[1]):
+        R, t, L, K = view_camera(views, b)
+        angle_row(
+            depth, R, t, L, K, src_proj, src_centres, src_depth, tiles_x, tiles_y,
+            lists, keys, n_active, tol, near, pix, b, j,
+        )  # fmt: skip
+
+
+@ti.func
+def view_sum(pix: ti.template(), sums: ti.template(), b: ti.i32):
+    """Sums of view b (see :func:`view_sums`)."""
+    total = 0.0
+    hits = 0
+    seen = 0
+    for j, i in ti.ndrange(pix.shape[1], pix.shape[2]):
+        p = pix[b, j, i]
+        if p >= 0.0:
+            total += p
+            hits += 1
+            if p < 179.999:
+                seen += 1
+    sums[b, 0] = total
+    sums[b, 1] = hits
+    sums[b, 2] = seen
 
 
 @ti.kernel
 def view_sums(pix: nd(dtype=ti.f32, ndim=3), sums: nd(dtype=ti.f32, ndim=2)):
     """Per view: sum of hit-pixel scores (deg), hit pixels, and pixels seen by some source."""
     for b in range(pix.shape[0]):
-        total = 0.0
-        hits = 0
-        seen = 0
-        for j, i in ti.ndrange(pix.shape[1], pix.shape[2]):
-            p = pix[b, j, i]
-            if p >= 0.0:
-                total += p
-                hits += 1
-                if p < 179.999:
-                    seen += 1
-        sums[b, 0] = total
-        sums[b, 1] = hits
-        sums[b, 2] = seen
+        view_sum(pix, sums, b)
+
+
+@ti.func
+def view_rays(R: ti.template(), K: ti.template()):
+    """(D0, Dx, Dy): the world-frame ray of pixel centre (j, i), scaled to unit camera z, is
+    D0 + i Dx + j Dy, so that the point at z-depth z is L + z (D0 + i Dx + j Dy) and the
+    direction from it towards the camera centre L is that of -(D0 + i Dx + j Dy)."""
+    Dx = ti.Vector([R[0, 0], R[0, 1], R[0, 2]]) / K[0]
+    Dy = ti.Vector([R[1, 0], R[1, 1], R[1, 2]]) / K[1]
+    D0 = ti.Vector([R[2, 0], R[2, 1], R[2, 2]]) + (0.5 - K[2]) * Dx + (0.5 - K[3]) * Dy
+    return D0, Dx, Dy
+
+
+@ti.func
+def tile_bound_cpu(
+    depth: ti.template(),
+    L: ti.template(),
+    D0: ti.template(),
+    Dx: ti.template(),
+    Dy: ti.template(),
+    b: ti.i32,
+    k: ti.i32,
+    tiles_x: ti.i32,
+    tiles_y: ti.i32,
+    bounds: ti.template(),
+):
+    """:func:`tile_bound` with the points of :func:`view_rays` (as :func:`angle_row_cpu`)."""
+    H = depth.shape[1]
+    W = depth.shape[2]
+    kx = k % tiles_x
+    ky = k // tiles_x
+    lo = ti.Vector([FAR, FAR, FAR])
+    hi = ti.Vector([-FAR, -FAR, -FAR])
+    acc = ti.Vector([0.0, 0.0, 0.0])
+    n = 0
+    for j in range((ky * H + tiles_y - 1) // tiles_y, ((ky + 1) * H + tiles_y - 1) // tiles_y):
+        Dj = D0 + j * Dy
+        for i in range((kx * W + tiles_x - 1) // tiles_x, ((kx + 1) * W + tiles_x - 1) // tiles_x):
+            z = depth[b, j, i]
+            if z < FAR:
+                P = L + z * (Dj + i * Dx)
+                lo = ti.min(lo, P)
+                hi = ti.max(hi, P)
+                acc += P
+                n += 1
+    acc /= ti.max(n, 1)
+    for c in ti.static(range(3)):
+        bounds[b, k, c] = lo[c]
+        bounds[b, k, c + 3] = hi[c]
+        bounds[b, k, c + 6] = acc[c]
+
+
+@ti.func
+def box_in_frustum(planes: ti.template(), s: ti.i32, lo: ti.template(), hi: ti.template()) -> bool:
+    """Whether the box [lo, hi] may hold a point inside source s's frustum (``planes``, see
+    :func:`cull`): False when it lies wholly outside one of the planes."""
+    inside = True
+    for p in ti.static(range(5)):
+        w = ti.Vector([planes[s, p, 0], planes[s, p, 1], planes[s, p, 2]])
+        # the box corner farthest along the plane normal
+        far_corner = ti.select(w > 0, hi, lo)
+        inside &= w.dot(far_corner) + planes[s, p, 3] >= 0
+    return inside
+
+
+@ti.func
+def camera_deviation(
+    R: ti.template(), K: ti.template(), r: ti.template(), dist, rho, i0, i1, j0, j1
+):
+    """Cosine and sine of the largest angle between the direction ``r`` (world frame, unit)
+    from the tile's mean point towards the camera, at distance ``dist``, and the direction
+    towards the camera from any point of the tile (box radius ``rho``, pixels i0..i1,
+    j0..j1): the smaller of asin(rho / dist) and the largest angle between ``r`` and the rays
+    of the tile's four corner pixels (every point of the tile is on a ray in between, and the
+    angle to a point inside a convex cone of rays is largest at a corner). (-1, 0) when
+    neither bound holds (the angle may reach pi)."""
+    c = -1.0
+    sn = 0.0
+    if rho < dist:
+        sn = rho / dist
+        c = ti.sqrt(ti.max(0.0, 1.0 - sn * sn))
+    rc = R @ r  # camera frame
+    cc = 1.0
+    sc = 0.0
+    for q in ti.static(range(4)):
+        i = i0 if ti.static(q % 2 == 0) else i1
+        j = j0 if ti.static(q // 2 == 0) else j1
+        d = -ti.Vector([(i + 0.5 - K[2]) / K[0], (j + 0.5 - K[3]) / K[1], 1.0])
+        inv = 1.0 / d.norm()
+        cq = d.dot(rc) * inv
+        sq = ti.min(1.0, d.cross(rc).norm() * inv)  # accurate for small angles, unlike cq
+        # the corner farthest from r: the least cosine (and -1 once a corner is >= 90 deg)
+        worse = cq < cc
+        cc = ti.select(worse, cq, cc)
+        sc = ti.select(worse, sq, sc)
+    if cc <= 0.0:
+        cc = -1.0
+    if cc > c:  # the corner bound is the smaller angle
+        c = cc
+        sn = sc
+    return c, sn
+
+
+@ti.func
+def cull_view(
+    R: ti.template(),
+    L: ti.template(),
+    K: ti.template(),
+    b: ti.i32,
+    W: ti.i32,
+    H: ti.i32,
+    tiles_x: ti.i32,
+    tiles_y: ti.i32,
+    bounds: ti.template(),
+    src_centres: ti.template(),
+    planes: ti.template(),
+    near_srcs: ti.template(),
+    lists: ti.template(),
+    tsrc: ti.template(),
+    n_active: ti.template(),
+):
+    """The sorted source list of every tile of view b (one thread; see :func:`cull` for the
+    definition), with less work:
+
+    - the sources are tested against the box of the whole view, those kept against the box
+      of each block of 2x2 tiles, and those kept against each of its tiles (a box inside a
+      bigger one is outside a plane only if the bigger one is), so the lists are the same;
+    - the camera's share of the lower bound of a source's angle is the smaller of
+      asin(rho / |L - Pm|) and the largest angle between L - Pm and the rays of the tile's
+      corner pixels (:func:`camera_deviation`);
+    - the cosine of the bound, cos(theta_m - delta), is formed from the cosines and sines of
+      theta_m and of the deviations by the angle-sum rules (no inverse trigonometry); sources
+      with theta_m <= delta get keys >= 1 (never a reason to stop), ordered by
+      cos theta_m - cos delta;
+    - ``tsrc`` (B, tiles, S) receives each listed source's centre and key side by side.
+
+    ``near_srcs`` (B, 2 S) is scratch: the view's sources, then the block's.
+    """
+    S = src_centres.shape[0]
+    vlo = ti.Vector([FAR, FAR, FAR])
+    vhi = ti.Vector([-FAR, -FAR, -FAR])
+    for k in range(tiles_x * tiles_y):
+        for c in ti.static(range(3)):
+            vlo[c] = ti.min(vlo[c], bounds[b, k, c])
+            vhi[c] = ti.max(vhi[c], bounds[b, k, c + 3])
+    nv = 0
+    if vlo[0] <= vhi[0]:
+        for s in range(S):
+            near_srcs[b, nv] = s  # kept if inside: no branch
+            nv += ti.cast(box_in_frustum(planes, s, vlo, vhi), ti.i32)
+    for gy in range((tiles_y + 1) // 2):
+        for gx in range((tiles_x + 1) // 2):
+            glo = ti.Vector([FAR, FAR, FAR])
+            ghi = ti.Vector([-FAR, -FAR, -FAR])
+            for q in ti.static(range(4)):
+                kx = 2 * gx + q % 2
+                ky = 2 * gy + q // 2
+                if kx < tiles_x and ky < tiles_y:
+                    k = kx + tiles_x * ky
+                    for c in ti.static(range(3)):
+                        glo[c] = ti.min(glo[c], bounds[b, k, c])
+                        ghi[c] = ti.max(ghi[c], bounds[b, k, c + 3])
+            ng = 0
+            if glo[0] <= ghi[0]:
+                for g in range(nv):
+                    s = near_srcs[b, g]
+                    near_srcs[b, S + ng] = s
+                    ng += ti.cast(box_in_frustum(planes, s, glo, ghi), ti.i32)
+            for q in ti.static(range(4)):
+                kx = 2 * gx + q % 2
+                ky = 2 * gy + q // 2
+                if kx < tiles_x and ky < tiles_y:
+                    k = kx + tiles_x * ky
+                    i0 = (kx * W + tiles_x - 1) // tiles_x
+                    i1 = ((kx + 1) * W + tiles_x - 1) // tiles_x - 1
+                    j0 = (ky * H + tiles_y - 1) // tiles_y
+                    j1 = ((ky + 1) * H + tiles_y - 1) // tiles_y - 1
+                    cull_tile_cpu(
+                        R, L, K, b, k, i0, i1, j0, j1, bounds, src_centres, planes, near_srcs,
+                        ng, lists, tsrc, n_active,
+                    )  # fmt: skip
+
+
+@ti.func
+def cull_tile_cpu(
+    R: ti.template(),
+    L: ti.template(),
+    K: ti.template(),
+    b: ti.i32,
+    k: ti.i32,
+    i0: ti.i32,
+    i1: ti.i32,
+    j0: ti.i32,
+    j1: ti.i32,
+    bounds: ti.template(),
+    src_centres: ti.template(),
+    planes: ti.template(),
+    near_srcs: ti.template(),
+    ng: ti.i32,
+    lists: ti.template(),
+    tsrc: ti.template(),
+    n_active: ti.template(),
+):
+    """Sorted source list of tile k (pixels i0..i1, j0..j1) of view b among the ``ng``
+    sources of ``near_srcs[b, S:]`` (see :func:`cull_view`)."""
+    S = src_centres.shape[0]
+    n = 0
+    if bounds[b, k, 0] <= bounds[b, k, 3]:
+        Pm = ti.Vector([bounds[b, k, 6], bounds[b, k, 7], bounds[b, k, 8]])
+        lo = ti.Vector([bounds[b, k, 0], bounds[b, k, 1], bounds[b, k, 2]])
+        hi = ti.Vector([bounds[b, k, 3], bounds[b, k, 4], bounds[b, k, 5]])
+        rho = ti.max(hi - Pm, Pm - lo).norm() * 1.001 + 1e-5
+        dist = (L - Pm).norm()
+        r = (L - Pm) / dist
+        c0, s0 = camera_deviation(R, K, r, dist, rho, i0, i1, j0, j1)
+        # delta_1 = camera deviation + 1e-4 (cos 1e-4 = 1 - 5e-9: 1 in float32)
+        c1 = c0 - s0 * 1e-4
+        s1 = s0 + c0 * 1e-4
+        for g in range(ng):
+            s = near_srcs[b, S + g]
+            if box_in_frustum(planes, s, lo, hi):
+                C = src_centres[s]
+                ds = C - Pm
+                dn = ds.norm()
+                cos_m = ti.min(1.0, ti.max(-1.0, r.dot(ds) / dn))
+                # cos and sin of delta = delta_1 + asin(rho / dn)
+                key = 3.0 + cos_m  # delta >= pi: no bound
+                if rho < dn and c0 > -1.0:
+                    s2 = rho / dn
+                    c2 = ti.sqrt(ti.max(0.0, 1.0 - s2 * s2))
+                    cd = c1 * c2 - s1 * s2
+                    sd = s1 * c2 + c1 * s2
+                    if sd >= 0.0:
+                        if cos_m < cd:  # theta_m > delta: cos(theta_m - delta)
+                            sin_m = ti.sqrt(ti.max(0.0, 1.0 - cos_m * cos_m))
+                            key = ti.min(1.0, cos_m * cd + sin_m * sd + 1e-6)
+                        else:
+                            key = 1.0 + (cos_m - cd)
+                m = n
+                while m > 0 and tsrc[b, k, m - 1][3] < key:
+                    lists[b, k, m] = lists[b, k, m - 1]
+                    tsrc[b, k, m] = tsrc[b, k, m - 1]
+                    m -= 1
+                lists[b, k, m] = s
+                tsrc[b, k, m] = ti.Vector([C.x, C.y, C.z, key])
+                n += 1
+    n_active[b, k] = n
+
+
+@ti.func
+def angle_row_cpu(
+    depth: ti.template(),
+    L: ti.template(),
+    D0: ti.template(),
+    Dx: ti.template(),
+    Dy: ti.template(),
+    src_proj: ti.template(),
+    src_dmax: ti.template(),
+    src_mm: ti.template(),
+    tiles_x: ti.i32,
+    tiles_y: ti.i32,
+    lists: ti.template(),
+    tsrc: ti.template(),
+    n_active: ti.template(),
+    tol: ti.f32,
+    near: ti.f32,
+    pix: ti.template(),
+    b: ti.i32,
+    j: ti.i32,
+):
+    """:func:`angle_row` for one thread that owns the whole view (camera loaded once, points
+    from :func:`view_rays`), reading the tiles' lists of (centre, key) of :func:`cull_view`
+    and the 2x2 maxima of the source depth maps (:func:`sees_max`).
+
+    Returns the row's sum of hit-pixel scores, hit pixels and seen pixels (see
+    :func:`view_sums`)."""
+    H = depth.shape[1]
+    W = depth.shape[2]
+    hint = -1
+    hint_c = ti.Vector([0.0, 0.0, 0.0])
+    k_row = tiles_x * ((j * tiles_y) // H)
+    kx = 0
+    i_next = (W + tiles_x - 1) // tiles_x  # first column of tile kx + 1
+    Dj = D0 + j * Dy
+    total = 0.0
+    hits = 0
+    seen = 0
+    for i in range(W):
+        if i >= i_next:
+            kx += 1
+            i_next = ((kx + 1) * W + tiles_x - 1) // tiles_x
+        z = depth[b, j, i]
+        out = -1.0
+        if z < FAR:
+            D = Dj + i * Dx
+            P = L + z * D
+            r = -D.normalized()
+            kt = kx + k_row
+            best = -2.0  # cosine of the best angle so far; -2 = no source sees P yet
+            best_s = -1
+            best_c = hint_c
+            # nested ifs: taichi's `and` does not short-circuit (hint = -1 must not be read)
+            if hint >= 0:  # noqa: SIM102
+                if sees_max(src_proj, src_dmax, src_mm, hint, P, tol, near):
+                    d = hint_c - P
+                    best = r.dot(d) / ti.sqrt(d.dot(d) + 1e-30)
+                    best_s = hint
+            bsq = best * best
+            for m in range(n_active[b, kt]):
+                e = tsrc[b, kt, m]
+                if e[3] <= best:
+                    break  # no later source of this tile can beat the best angle
+                d = ti.Vector([e[0], e[1], e[2]]) - P
+                dt = r.dot(d)
+                n2 = d.dot(d)
+                # "cos(angle) > best" without a square root or a division
+                better = False
+                if best >= 0.0:
+                    better = dt > 0.0 and dt * dt > bsq * n2
+                else:
+                    better = dt >= 0.0 or dt * dt < bsq * n2
+                if better:
+                    s = lists[b, kt, m]
+                    if s != best_s:  # noqa: SIM102 (sees() is costly: only if better)
+                        if sees_max(src_proj, src_dmax, src_mm, s, P, tol, near):
+                            best = dt / ti.sqrt(n2 + 1e-30)
+                            bsq = best * best
+                            best_s = s
+                            best_c = ti.Vector([e[0], e[1], e[2]])
+            if best < -1.5:
+                out = 180.0
+            else:
+                out = ti.acos(ti.min(1.0, ti.max(-1.0, best))) * 57.29577951308232
+            hint = best_s
+            hint_c = best_c
+            total += out
+            hits += 1
+            seen += ti.cast(out < 179.999, ti.i32)
+        pix[b, j, i] = out
+    return total, hits, seen
+
+
+@ti.kernel
+def score_per_view(
+    verts: nd(dtype=ti.f32, ndim=2),
+    tris: nd(dtype=ti.i32, ndim=2),
+    spheres: nd(dtype=ti.f32, ndim=2),
+    clusters: nd(dtype=ti.f32, ndim=2),
+    views: nd(dtype=ti.f32, ndim=2),
+    n: ti.i32,
+    n_tasks: ti.i32,
+    near: ti.f32,
+    depth: nd(dtype=ti.f32, ndim=3),
+    tiles_x: ti.i32,
+    tiles_y: ti.i32,
+    bounds: nd(dtype=ti.f32, ndim=3),
+    src_centres: nd(dtype=ti.math.vec3, ndim=1),
+    planes: nd(dtype=ti.f32, ndim=3),
+    near_srcs: nd(dtype=ti.i32, ndim=2),
+    lists: nd(dtype=ti.i32, ndim=3),
+    tsrc: nd(dtype=ti.math.vec4, ndim=3),
+    n_active: nd(dtype=ti.i32, ndim=2),
+    src_proj: nd(dtype=ti.f32, ndim=2),
+    src_dmax: nd(dtype=ti.f32, ndim=3),
+    src_mm: nd(dtype=ti.math.vec2, ndim=3),
+    tol: ti.f32,
+    pix: nd(dtype=ti.f32, ndim=3),
+    sums: nd(dtype=ti.f32, ndim=2),
+):
+    """All passes of the score for views 0..n-1, one thread per view (see :func:`task_view`
+    for ``n_tasks``): for CPUs.
+
+    The same computation as :func:`raster`, :func:`tile_bounds`, :func:`cull`,
+    :func:`angles` and :func:`view_sums` in turn, but each view's z-buffer, tile lists and
+    pixel scores are made and used by one thread while they are in its cache, a batch costs
+    one launch, triangles are culled by cluster first (:func:`raster_view`) and sources by
+    blocks of tiles first (:func:`cull_view`).
+    """
+    H = depth.shape[1]
+    W = depth.shape[2]
+    for task in range(n_tasks):
+        b = task_view(task, n, n_tasks)
+        if b >= 0:
+            raster_view(verts, tris, spheres, clusters, views, depth, near, b)
+            R, _, L, K = view_camera(views, b)
+            D0, Dx, Dy = view_rays(R, K)
+            for k in range(bounds.shape[1]):
+                tile_bound_cpu(depth, L, D0, Dx, Dy, b, k, tiles_x, tiles_y, bounds)
+            cull_view(
+                R, L, K, b, W, H, tiles_x, tiles_y, bounds, src_centres, planes, near_srcs,
+                lists, tsrc, n_active,
+            )  # fmt: skip
+            total = 0.0
+            hits = 0
+            seen = 0
+            for j in range(H):
+                row_total, row_hits, row_seen = angle_row_cpu(
+                    depth, L, D0, Dx, Dy, src_proj, src_dmax, src_mm, tiles_x, tiles_y, lists,
+                    tsrc, n_active, tol, near, pix, b, j,
+                )  # fmt: skip
+                total += row_total
+                hits += row_hits
+                seen += row_seen
+            sums[b, 0] = total
+            sums[b, 1] = hits
+            sums[b, 2] = seen

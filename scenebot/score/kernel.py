@@ -26,6 +26,21 @@ Both passes run in taichi, batched over ``batch_size`` candidates per launch:
    best angle so far (exact early exit), and runs the depth-map visibility test only for a
    source that would lower its current minimum. So the result equals the brute-force
    definition; only the work differs.
+
+On a CPU (``per_view``, the default there) all passes of a view run in one launch and on one
+thread, while the view's z-buffer and tile lists are in that thread's cache, with less work
+than the GPU's batched passes (same results up to float rounding):
+
+- taichi splits a CPU loop into one block per thread of at least 512 iterations, so the loop
+  runs over ``max(views, 512 x threads)`` tasks (a loop over 256 views would use one thread);
+- triangles are stored in Z-order and culled by clusters of 32 before their own test; the
+  z-buffer keeps the largest 1/z (no division and no branch per covered pixel: branch
+  mispredictions at triangle edges cost more than the arithmetic);
+- sources are culled against the whole view's box, then blocks of 2x2 tiles, then tiles; the
+  camera's share of each lower bound also uses the tile's corner-pixel rays; keys come from
+  the angle-sum rules instead of inverse trigonometry;
+- the depth test reads a precomputed 2x2 maximum (one load) and, first, the least and largest
+  of those over 4x4 blocks (16 times smaller, mostly in cache), which decide most tests.
 """
 
 from __future__ import annotations
@@ -43,6 +58,11 @@ FAR = 1.0e30
 """Depth of a pixel whose ray hits nothing (m)."""
 
 _TI_STATE: dict[str, object] = {}
+
+TILE_PX_BATCHED = (8, 12)
+"""Default tile size (pixels) of the batched (GPU) passes."""
+TILE_PX_PER_VIEW = (10, 10)
+"""Default tile size (pixels) of the per-view (CPU) pass."""
 
 
 def init_taichi(backend: str = "auto") -> str:
@@ -102,20 +122,76 @@ def init_taichi(backend: str = "auto") -> str:
     return arch
 
 
+def _tikernels():
+    from scenebot.score import _tikernels as k
+
+    return k
+
+
 def _kernels():
     import taichi as ti
 
-    from scenebot.score import _tikernels as k
+    k = _tikernels()
 
     gpu = ti.lang.impl.current_cfg().arch in (ti.cuda, ti.vulkan)
     return {
         "fill": k.fill,
         "raster": k.raster if gpu else k.raster_per_view,
+        "raster_clustered": k.raster_clustered,
         "tile_bounds": k.tile_bounds,
         "cull": k.cull,
         "angles": k.angles,
         "view_sums": k.view_sums,
+        "score_per_view": k.score_per_view,
+        "neighbourhood_max": k.neighbourhood_max,
+        "block_min_max": k.block_min_max,
     }
+
+
+def spatial_order(points: np.ndarray) -> np.ndarray:
+    """Indices that sort points along a Z-order (Morton) curve of their bounding box, so that
+    consecutive points lie close together.
+
+    Args:
+        points: (N, 3) positions (m).
+
+    Returns:
+        (N,) permutation (stable for equal codes).
+    """
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return np.zeros(0, np.int64)
+    lo = p.min(axis=0)
+    span = max(float((p.max(axis=0) - lo).max()), 1e-12)
+    q = np.clip(((p - lo) / span * 1023.0).astype(np.int64), 0, 1023)
+    code = np.zeros(len(p), np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
+def cluster_spheres(spheres: np.ndarray, size: int) -> np.ndarray:
+    """Bounding spheres of groups of ``size`` consecutive spheres.
+
+    Args:
+        spheres: (T, 4) centres and radii (m).
+        size: spheres per group (the last group may hold fewer).
+
+    Returns:
+        (ceil(T / size), 4) centres (the middle of the group's centres' bounding box) and radii
+        that enclose every sphere of the group, loosened by 0.1 % + 10 um so that float
+        rounding never culls a group that holds a triangle the per-triangle test keeps.
+    """
+    s = np.asarray(spheres, np.float64).reshape(-1, 4)
+    n = -(-len(s) // size)
+    out = np.zeros((n, 4))
+    for c in range(n):
+        g = s[c * size : (c + 1) * size]
+        centre = 0.5 * (g[:, :3].min(axis=0) + g[:, :3].max(axis=0))
+        out[c, :3] = centre
+        out[c, 3] = (np.linalg.norm(g[:, :3] - centre, axis=1) + g[:, 3]).max() * 1.001 + 1e-5
+    return out
 
 
 def projection_rows(views: np.ndarray) -> np.ndarray:
@@ -230,7 +306,11 @@ class TaichiScorer:
         backend: ``"auto"``, ``"cpu"`` or ``"gpu"`` (see :func:`init_taichi`).
         tile_px: (width, height) of the image tiles (pixels); each tile of each candidate
             visits only the sources whose frustum can hold one of the tile's points, sorted by
-            a lower bound of their angle (exact culling and early exit, for speed).
+            a lower bound of their angle (exact culling and early exit, for speed). Default:
+            ``TILE_PX_PER_VIEW`` on the per-view pass, ``TILE_PX_BATCHED`` on the batched one.
+        per_view: run every pass of a view on one thread in one launch (CPUs) rather than
+            the batched passes with a thread per row, tile or chunk of triangles (GPUs).
+            Default: per view on a CPU, batched on a GPU.
     """
 
     def __init__(
@@ -244,12 +324,15 @@ class TaichiScorer:
         near_m: float = 0.02,
         batch_size: int = 256,
         backend: str = "auto",
-        tile_px: tuple[int, int] = (8, 12),
+        tile_px: tuple[int, int] | None = None,
+        per_view: bool | None = None,
     ) -> None:
         import taichi as ti
 
         self.arch = init_taichi(backend)
         self.k = _kernels()
+        # one thread per view on CPUs; the GPU needs a thread per pixel row, tile or chunk
+        self.per_view = self.arch not in ("cuda", "vulkan") if per_view is None else per_view
         verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
         faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
         if faces.shape[0] == 0:
@@ -263,6 +346,11 @@ class TaichiScorer:
         self.batch = int(batch_size)
         self.n_src = src_views.shape[0]
         self.src_centres = src_views[:, 12:15].astype(np.float64)
+        # triangles in Z-order of their centroids: CLUSTER consecutive ones lie close together
+        # and are culled as one by the per-view rasterizer (the z-buffer, a minimum, does not
+        # depend on the order)
+        centroid = verts[faces].astype(np.float64).mean(axis=1)
+        faces = np.ascontiguousarray(faces[spatial_order(centroid)])
         self._verts = self._to_dev(ti, verts, ti.f32)
         self._faces = self._to_dev(ti, faces, ti.i32)
         tri = verts[faces].astype(np.float64)
@@ -270,18 +358,27 @@ class TaichiScorer:
         radius = np.linalg.norm(tri - centroid[:, None], axis=2).max(axis=1) * 1.001 + 1e-5
         spheres = np.column_stack([centroid, radius]).astype(np.float32)
         self._spheres = self._to_dev(ti, spheres, ti.f32)
+        clusters = cluster_spheres(spheres, _tikernels().CLUSTER).astype(np.float32)
+        self._clusters = self._to_dev(ti, clusters, ti.f32)
         self._src_views = self._to_dev(ti, src_views, ti.f32)
         ws, hs = src_size
         self.src_depth = ti.ndarray(ti.f32, shape=(self.n_src, hs, ws))
-        self.k["fill"](self.src_depth, FAR)
-        self.k["raster"](
-            self._verts, self._faces, self._spheres, self._src_views, self.src_depth, self.near
-        )
+        self._raster(self._src_views, self.src_depth, self.n_src)
+        if self.per_view:
+            self._src_dmax = ti.ndarray(ti.f32, shape=(self.n_src, hs, ws))
+            self.k["neighbourhood_max"](self.src_depth, self._src_dmax)
+            blk = _tikernels().DMAX_BLOCK
+            self._src_mm = ti.ndarray(
+                ti.math.vec2, shape=(self.n_src, -(-hs // blk), -(-ws // blk))
+            )
+            self.k["block_min_max"](self._src_dmax, self._src_mm)
         self._src_proj = self._to_dev(ti, projection_rows(src_views), ti.f32)
         self._src_centres = ti.ndarray(ti.math.vec3, shape=(self.n_src,))
         self._src_centres.from_numpy(np.ascontiguousarray(src_views[:, 12:15]))
         planes = frustum_planes(src_views, src_size, self.near).astype(np.float32)
         self._planes = self._to_dev(ti, planes, ti.f32)
+        if tile_px is None:
+            tile_px = TILE_PX_PER_VIEW if self.per_view else TILE_PX_BATCHED
         self.tiles = (
             max(1, round(intr.width / max(1, tile_px[0]))),
             max(1, round(intr.height / max(1, tile_px[1]))),
@@ -291,7 +388,11 @@ class TaichiScorer:
         self._pix = ti.ndarray(ti.f32, shape=(self.batch, intr.height, intr.width))
         self._bounds = ti.ndarray(ti.f32, shape=(self.batch, n_tiles, 9))
         self._lists = ti.ndarray(ti.i32, shape=(self.batch, n_tiles, self.n_src))
-        self._keys = ti.ndarray(ti.f32, shape=(self.batch, n_tiles, self.n_src))
+        if self.per_view:
+            self._tsrc = ti.ndarray(ti.math.vec4, shape=(self.batch, n_tiles, self.n_src))
+            self._near_srcs = ti.ndarray(ti.i32, shape=(self.batch, 2 * self.n_src))
+        else:
+            self._keys = ti.ndarray(ti.f32, shape=(self.batch, n_tiles, self.n_src))
         self._n_active = ti.ndarray(ti.i32, shape=(self.batch, n_tiles))
         self._sums = ti.ndarray(ti.f32, shape=(self.batch, 3))
 
@@ -315,12 +416,31 @@ class TaichiScorer:
             (N, H, W) depth along the camera z axis (m; ``FAR`` where nothing is hit).
         """
         n = views.shape[0]
-        self._render(np.ascontiguousarray(views, dtype=np.float32))
+        v32 = np.zeros((self.batch, VIEW_COLS), dtype=np.float32)
+        v32[:n] = views
+        v32[n:] = views[0]
+        self._raster(v32, self._depth, n)
         return self._depth.to_numpy()[:n]
 
     def _render(self, views32: np.ndarray) -> None:
-        self.k["fill"](self._depth, FAR)
-        self.k["raster"](self._verts, self._faces, self._spheres, views32, self._depth, self.near)
+        self._raster(views32, self._depth, len(views32))
+
+    def _n_tasks(self, n: int) -> int:
+        """Parallel tasks of a per-view kernel over n views (see ``_tikernels.task_view``)."""
+        import taichi as ti
+
+        return max(n, 512 * max(1, ti.lang.impl.current_cfg().cpu_max_num_threads))
+
+    def _raster(self, views32, depth, n: int) -> None:
+        """Z-buffers of the first n views into ``depth`` (all of it on the batched path)."""
+        if self.per_view:
+            self.k["raster_clustered"](
+                self._verts, self._faces, self._spheres, self._clusters, views32, depth, n,
+                self._n_tasks(n), self.near,
+            )  # fmt: skip
+        else:
+            self.k["fill"](depth, FAR)
+            self.k["raster"](self._verts, self._faces, self._spheres, views32, depth, self.near)
 
     def score(self, poses: np.ndarray, return_pixels: bool = False) -> ScoreResult:
         """Score planar candidate poses.
@@ -345,8 +465,20 @@ class TaichiScorer:
             v32 = np.zeros((self.batch, VIEW_COLS), dtype=np.float32)
             v32[:m] = v
             v32[m:] = v[0]
-            self._render(v32)
             tx, ty = self.tiles
+            if self.per_view:
+                self.k["score_per_view"](
+                    self._verts, self._faces, self._spheres, self._clusters, v32, m,
+                    self._n_tasks(m), self.near,
+                    self._depth, tx, ty, self._bounds, self._src_centres, self._planes,
+                    self._near_srcs, self._lists, self._tsrc, self._n_active, self._src_proj,
+                    self._src_dmax, self._src_mm, self.tol, self._pix, self._sums,
+                )  # fmt: skip
+                sums.append(self._sums.to_numpy()[:m].astype(np.float64))
+                if return_pixels:
+                    outs.append(self._pix.to_numpy()[:m])
+                continue
+            self._render(v32)
             self.k["tile_bounds"](self._depth, v32, tx, ty, self._bounds)
             self.k["cull"](
                 self._bounds,
