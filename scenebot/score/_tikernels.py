@@ -556,6 +556,25 @@ def deviation(rho: ti.f32, dist: ti.f32) -> ti.f32:
 
 
 @ti.func
+def project(src_proj: ti.template(), s: ti.i32, P: ti.template(), near: ti.f32, Ws: ti.i32):
+    """``(depth, u, v)`` of world point P in source s (projection rows K [R | t]): depth
+    first, then u, then v, stopping early (u, v stay -1 where the point is behind the camera
+    or left or right of the image)."""
+    qz = src_proj[s, 8] * P.x + src_proj[s, 9] * P.y + src_proj[s, 10] * P.z + src_proj[s, 11]
+    u = -1.0
+    v = -1.0
+    if qz > near:
+        u = (
+            src_proj[s, 0] * P.x + src_proj[s, 1] * P.y + src_proj[s, 2] * P.z + src_proj[s, 3]
+        ) / qz
+    if u >= 0.0 and u < Ws:
+        v = (
+            src_proj[s, 4] * P.x + src_proj[s, 5] * P.y + src_proj[s, 6] * P.z + src_proj[s, 7]
+        ) / qz
+    return ti.Vector([qz, u, v])
+
+
+@ti.func
 def sees(
     src_proj: ti.template(),
     src_depth: ti.template(),
@@ -569,18 +588,8 @@ def sees(
     Hs = src_depth.shape[1]
     Ws = src_depth.shape[2]
     ok = False
-    # projection rows K [R | t]: depth first, then u, then v, stopping early
-    qz = src_proj[s, 8] * P.x + src_proj[s, 9] * P.y + src_proj[s, 10] * P.z + src_proj[s, 11]
-    u = -1.0
-    v = -1.0
-    if qz > near:
-        u = (
-            src_proj[s, 0] * P.x + src_proj[s, 1] * P.y + src_proj[s, 2] * P.z + src_proj[s, 3]
-        ) / qz
-    if u >= 0.0 and u < Ws:
-        v = (
-            src_proj[s, 4] * P.x + src_proj[s, 5] * P.y + src_proj[s, 6] * P.z + src_proj[s, 7]
-        ) / qz
+    q = project(src_proj, s, P, near, Ws)
+    qz, u, v = q[0], q[1], q[2]
     if v >= 0.0 and v < Hs:
         x0 = ti.max(0, ti.cast(ti.floor(u - 0.5), ti.i32))
         y0 = ti.max(0, ti.cast(ti.floor(v - 0.5), ti.i32))
@@ -641,17 +650,8 @@ def sees_max(
     Hs = src_dmax.shape[1]
     Ws = src_dmax.shape[2]
     ok = False
-    qz = src_proj[s, 8] * P.x + src_proj[s, 9] * P.y + src_proj[s, 10] * P.z + src_proj[s, 11]
-    u = -1.0
-    v = -1.0
-    if qz > near:
-        u = (
-            src_proj[s, 0] * P.x + src_proj[s, 1] * P.y + src_proj[s, 2] * P.z + src_proj[s, 3]
-        ) / qz
-    if u >= 0.0 and u < Ws:
-        v = (
-            src_proj[s, 4] * P.x + src_proj[s, 5] * P.y + src_proj[s, 6] * P.z + src_proj[s, 7]
-        ) / qz
+    q = project(src_proj, s, P, near, Ws)
+    qz, u, v = q[0], q[1], q[2]
     if v >= 0.0 and v < Hs:
         x0 = ti.max(0, ti.cast(ti.floor(u - 0.5), ti.i32))
         y0 = ti.max(0, ti.cast(ti.floor(v - 0.5), ti.i32))
