@@ -42,6 +42,7 @@ import numpy as np
 from scenebot.evaluate.config import EvaluateConfig
 from scenebot.geometry import Intrinsics, look_rotation
 from scenebot.robot.base import Pose2D
+from scenebot.robot.factory import start_pose
 from scenebot.scene.mesh import SceneMesh
 from scenebot.sim.obstacles import ObstacleMap
 
@@ -198,18 +199,6 @@ def reachable_mask(cmap: ObstacleMap, start_xy, radius_m: float) -> np.ndarray:
         )
     _, labels = cv2.connectedComponents(free.astype(np.uint8), connectivity=4)
     return labels == labels[r, c]
-
-
-def start_pose(scene: SceneMesh, world_cfg, cmap: ObstacleMap) -> Pose2D:
-    """The robot's start pose as the capture stage chooses it (config, scene, or freest cell)."""
-    if world_cfg is not None and world_cfg.start is not None:
-        s = world_cfg.start
-        return Pose2D(s.x, s.y, math.radians(s.theta_deg))
-    if scene.start is not None:
-        return scene.start
-    r, c = np.unravel_index(np.argmax(cmap.clearance), cmap.clearance.shape)
-    xy = cmap.origin + np.array([c, r]) * cmap.res
-    return Pose2D(float(xy[0]), float(xy[1]), 0.0)
 
 
 def sample_viewpoints(

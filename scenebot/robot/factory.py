@@ -21,11 +21,11 @@ from scenebot.config import Config
 from scenebot.robot.base import Pose2D
 
 
-def start_pose(cfg: Config, scene, collision_map) -> Pose2D:
-    """The configured start pose, else the scene's, else the centre of the widest free
-    space of ``collision_map`` (heading 0)."""
-    if cfg.world.start is not None:
-        s = cfg.world.start
+def start_pose(scene, world_cfg, collision_map) -> Pose2D:
+    """The configured start pose (``world_cfg.start``; ``world_cfg`` may be None), else the
+    scene's, else the centre of the widest free space of ``collision_map`` (heading 0)."""
+    if world_cfg is not None and world_cfg.start is not None:
+        s = world_cfg.start
         return Pose2D(s.x, s.y, math.radians(s.theta_deg))
     if scene.start is not None:
         return scene.start
@@ -52,7 +52,7 @@ def make_sim_world(cfg: Config, start: Pose2D | None = None):
             cmap = ObstacleMap.build(
                 scene, scene.floor_z + body.clearance_m, scene.floor_z + body.height_m
             )
-        start = start_pose(cfg, scene, cmap)
+        start = start_pose(scene, cfg.world, cmap)
     return SimWorld(scene, cfg.sim, start, seed=cfg.seed)
 
 
