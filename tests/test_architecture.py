@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 
 from scenebot import _deps
+from tests.fixtures.package import copy_package
 
 REPO = Path(__file__).resolve().parents[1]
-PKG = REPO / "scenebot"
 
 
 def circles(graph: dict[str, frozenset]) -> list[list[str]]:
@@ -100,12 +100,7 @@ def test_import_contracts_hold():
 @pytest.fixture
 def package_copy(tmp_path) -> Path:
     """A copy of the package's modules and of pyproject.toml, to plant imports in."""
-
-    def not_python(folder, names):
-        return [n for n in names if (Path(folder) / n).is_file() and not n.endswith(".py")]
-
-    shutil.copytree(PKG, tmp_path / "scenebot", ignore=not_python)
-    shutil.rmtree(tmp_path / "scenebot" / "__pycache__", ignore_errors=True)
+    copy_package(tmp_path)
     shutil.copy(REPO / "pyproject.toml", tmp_path)
     yield tmp_path
     _deps.refresh()

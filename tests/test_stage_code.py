@@ -5,12 +5,12 @@ up, and the other commands' modules are not."""
 from __future__ import annotations
 
 import re
-import shutil
 from pathlib import Path
 
 import pytest
 
 from scenebot import _deps
+from tests.fixtures.package import copy_package
 
 REPO = Path(__file__).resolve().parents[1]
 PKG = REPO / "scenebot"
@@ -64,12 +64,7 @@ def test_an_unknown_command_is_an_error():
 
 @pytest.fixture
 def package_copy(tmp_path) -> Path:
-    def not_python(folder, names):
-        return [n for n in names if (Path(folder) / n).is_file() and not n.endswith(".py")]
-
-    shutil.copytree(PKG, tmp_path / "scenebot", ignore=not_python)
-    shutil.rmtree(tmp_path / "scenebot" / "__pycache__", ignore_errors=True)
-    yield tmp_path / "scenebot"
+    yield copy_package(tmp_path)
     _deps.refresh()
 
 

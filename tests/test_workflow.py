@@ -247,15 +247,21 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
 
 @pytest.mark.slow
 @pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
-def test_bring_your_own_photos_make_round_0(workdir):
-    """robot: photos: a plain folder of JPEGs (no log, no robot) becomes round 0's map."""
-    folder = workdir / "my_photos"
+def _photo_folder(folder: Path) -> tuple[Path, dict, dict]:
+    """The canned photos copied into ``folder`` as a person's photo folder: the folder, its
+    files' bytes (to check nothing is modified) and a ``robot: photos`` config for it."""
     folder.mkdir()
     for p in sorted((CANNED / "images").glob("*.jpg")):
         shutil.copy(p, folder / p.name)
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     cfg = dict(SMALL, robot="photos", photos={"folder": str(folder)})
     cfg["sfm"] = {"peak_threshold": 0.002, "exhaustive_max_images": 60}  # no odometry: all pairs
+    return folder, before, cfg
+
+
+def test_bring_your_own_photos_make_round_0(workdir):
+    """robot: photos: a plain folder of JPEGs (no log, no robot) becomes round 0's map."""
+    folder, before, cfg = _photo_folder(workdir / "my_photos")
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     res = snakemake(workdir, "results/office/round_000/sfm/map.png")
     assert res.returncode == 0, why(res, workdir)
@@ -271,13 +277,7 @@ def test_bring_your_own_photos_build_the_final_targets(workdir):
     """robot: photos through `rule all`: every stage after sfm receives only its own config
     sections and must still accept them (the photo folder is the sfm stage's business), up to
     the dense model and the tour. Small settings keep it cheap."""
-    folder = workdir / "my photos"  # a space in the path, as users have
-    folder.mkdir()
-    for p in sorted((CANNED / "images").glob("*.jpg")):
-        shutil.copy(p, folder / p.name)
-    before = {p.name: p.read_bytes() for p in folder.iterdir()}
-    cfg = dict(SMALL, robot="photos", photos={"folder": str(folder)})
-    cfg["sfm"] = {"peak_threshold": 0.002, "exhaustive_max_images": 60}  # no odometry: all pairs
+    folder, before, cfg = _photo_folder(workdir / "my photos")  # a space, as users have
     cfg["score"] = {"n_candidates": 100}
     cfg["goals"] = {"k": 2}
     cfg["dense"] = {"max_image_size": 160, "plane_fill": {"enabled": False}}
