@@ -301,7 +301,8 @@ def main() -> None:
             if args.json:
                 args.json.write_text(json.dumps({"name": name, "wall_s": wall, "cpu_s": cpu, **m}))
         return
-    from scenebot.dense.patchmatch import PatchMatchSolver, init_taichi
+    from scenebot.dense.patchmatch import PatchMatchSolver
+    from scenebot.taichi_setup import init_taichi
 
     if args.stage:
         init_taichi(args.arch, args.threads)

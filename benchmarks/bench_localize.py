@@ -83,13 +83,15 @@ def build_office_map(world: SimWorld, spots: int, headings: int, seed: int = 0) 
             return MapDescriptors(z["point_ids"], z["xyz"], z["descriptors"])
     rng = np.random.default_rng(seed)
     intr = world.intrinsics
+    loc = LocalizeConfig()
     xyz, desc = [], []
     for _ in range(spots):
         xy = free_spot(world, rng, 0.5)
         for th in np.arange(headings) * 2 * math.pi / headings:
             R, c = camera_at(world, xy, th)
             img, depth = world.renderer.render(intr, R, c, rng, return_depth=True)
-            kps, d = extract_sift(load_gray(img))
+            # the map's SIFT: COLMAP's first octave (-1), as the sfm stage extracts it
+            kps, d = extract_sift(load_gray(img), -1, loc.sift_max_features, loc.sift_num_threads)
             ij = np.clip(kps.astype(int), 0, [intr.width - 1, intr.height - 1])
             z = np.asarray(depth)[ij[:, 1], ij[:, 0]]
             ok = np.isfinite(z) & (z > 0)
@@ -170,10 +172,12 @@ def extraction_speed(world, repeats: int) -> None:
     gray = load_gray(world.renderer.render(world.intrinsics, R, c, rng))
     print(f"\nSIFT extraction at {gray.shape[1]}x{gray.shape[0]} (median of {repeats})")
     print(f"{'extractor':>28} {'features':>8} {'ms':>8} {'ratio':>6}")
+    loc = LocalizeConfig()
+    sift = (loc.sift_max_features, loc.sift_num_threads)
     ref = None
     rows = [
-        ("pycolmap first_octave=-1", lambda: extract_sift(gray, -1)),
-        ("pycolmap first_octave=0", lambda: extract_sift(gray, 0)),
+        ("pycolmap first_octave=-1", lambda: extract_sift(gray, -1, *sift)),
+        ("pycolmap first_octave=0", lambda: extract_sift(gray, 0, *sift)),
         ("opencv SIFT (not used)", lambda: cv2.SIFT_create().detectAndCompute(gray, None)),
     ]
     for name, fn in rows:
@@ -226,13 +230,14 @@ def matching_speed(md: MapDescriptors, n_map: int, n_query: int, repeats: int) -
     q_rows = rng.choice(len(base), n_query, replace=False)
     q = np.clip(base[q_rows] + rng.normal(0, 6.0, (n_query, 128)), 0, 255).astype(np.uint8)
     t0 = time.perf_counter()
-    checks = LocalizeConfig().flann_checks
+    loc = LocalizeConfig()
+    checks = loc.flann_checks
     index = DescriptorIndex(bigmap.descriptors, trees=4, checks=checks)
     build_s = time.perf_counter() - t0
     ts = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        m = match_to_map(q, index, bigmap, knn=6, ratio=0.8)
+        m = match_to_map(q, index, bigmap, knn=loc.knn, ratio=loc.ratio)
         ts.append(time.perf_counter() - t0)
     flann_ms = float(np.median(ts)) * 1e3
     idx_f, _ = index.knn(q, 1)
@@ -321,7 +326,7 @@ def sfm_accuracy(sfm_dir: Path, capture_dir: Path, queries: int, seed: int = 3) 
 
 
 def follow_trial(scene, md: MapDescriptors, cam, n_goals: int, seed: int = 2) -> None:
-    from scenebot.follow import FollowConfig, PathFollower
+    from scenebot.capture.follow import FollowConfig, PathFollower
     from scenebot.plan import PlanConfig, build_navgrid
     from scenebot.plan.path import GridPlanner
     from scenebot.robot.sim import SimCamera, SimRobot
@@ -350,7 +355,9 @@ def follow_trial(scene, md: MapDescriptors, cam, n_goals: int, seed: int = 2) ->
         inflate_m=cfg.body.radius_m + 0.03,
         lethal_points=2.0,
     )
-    planner = GridPlanner(build_navgrid(pts, np.array([lo[:2], hi[:2]]), pcfg))
+    planner = GridPlanner(
+        build_navgrid(pts, np.array([lo[:2], hi[:2]]), pcfg), pcfg.simplify_factor
+    )
     lcfg = LocalizeConfig()
     follower = PathFollower(
         SimRobot(world),

@@ -31,12 +31,14 @@ import numpy as np
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
+from scenebot.artifacts.mesh import decimate
+from scenebot.geometry import Intrinsics, read_sparse_map
+from scenebot.mesh.config import MeshConfig
+from scenebot.mesh.freespace import compute_freespace
+from scenebot.mesh.poisson import build_mesh
 from scenebot.score.candidates import sample_candidates
-from scenebot.score.config import MeshConfig, ScoreConfig
-from scenebot.score.freespace import compute_freespace
-from scenebot.score.geometry import Intrinsics, read_sparse_map
+from scenebot.score.config import ScoreConfig
 from scenebot.score.kernel import TaichiScorer, init_taichi, source_views_for_depth
-from scenebot.score.mesh import build_mesh, decimate
 from scenebot.score.reference import ReferenceScorer
 from scenebot.testing import score as syn
 
@@ -102,11 +104,13 @@ def rate(fn, n: int, repeats: int) -> tuple[float, float, float, float]:
 def scorers(V, F, R, t, K, w, h, S, batch, backend="cpu", reference=True, kernel=None):
     """Taichi scorer (of ``kernel``, a module such as :func:`kernel_at` returns, default the
     current one) and numpy reference scorer for the first S sources at w x h."""
-    sv, size = source_views_for_depth(R[:S], t[:S], [K] * S, ScoreConfig().source_depth_width)
+    cfg = ScoreConfig()
+    sv, size = source_views_for_depth(R[:S], t[:S], [K] * S, cfg.source_depth_width)
     intr = K.scaled(w, h)
+    common = {"depth_tolerance": cfg.depth_tolerance, "near_m": cfg.near_m}
     cls = TaichiScorer if kernel is None else kernel.TaichiScorer
-    tk = cls(V, F, sv, size, intr, batch_size=batch, backend=backend)
-    ref = ReferenceScorer(V, F, sv, size, intr) if reference else None
+    tk = cls(V, F, sv, size, intr, batch_size=batch, backend=backend, **common)
+    ref = ReferenceScorer(V, F, sv, size, intr, **common) if reference else None
     return tk, ref
 
 
@@ -242,7 +246,15 @@ def main() -> None:
         Vd, Fd = decimate(V0, F0, n_tri)
         sv, size = source_views_for_depth(R[:100], t[:100], [K] * 100, cfg.source_depth_width)
         tk = TaichiScorer(
-            Vd, Fd, sv, size, K.scaled(80, 60), batch_size=cfg.batch_size, backend=args.arch
+            Vd,
+            Fd,
+            sv,
+            size,
+            K.scaled(80, 60),
+            depth_tolerance=cfg.depth_tolerance,
+            near_m=cfg.near_m,
+            batch_size=cfg.batch_size,
+            backend=args.arch,
         )
         tk.score(cands[: cfg.batch_size])
         s = tk.score(cands[:nd]).score_deg

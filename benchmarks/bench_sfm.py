@@ -48,7 +48,7 @@ from scenebot.sfm.stage import SfmInputs, SfmOutputs, run
 def make_sim_rounds(scene: Path, config: Path, photos0: int, photos1: int) -> None:
     import yaml
 
-    from scenebot.capture import run_capture
+    from scenebot.capture.stage import run_capture
     from scenebot.config import validate_config
 
     data = yaml.safe_load(config.read_text())
@@ -89,7 +89,7 @@ def accuracy_by_seed(seeds: list[int], config: Path, work: Path, photos: int) ->
     """Round-0 accuracy per exploration seed: default settings vs the previous defaults."""
     import yaml
 
-    from scenebot.capture import run_capture
+    from scenebot.capture.stage import run_capture
     from scenebot.config import validate_config
 
     offset = camera_offset_from_config(config)

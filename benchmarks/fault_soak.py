@@ -59,7 +59,7 @@ import cv2
 import numpy as np
 
 import scenebot.robot.nxt.backend as nxt_backend
-from scenebot.capture import run_capture
+from scenebot.capture.stage import run_capture
 from scenebot.capturelog import read_log
 from scenebot.config import Config, validate_config
 from scenebot.robot.base import RobotError

@@ -274,10 +274,10 @@ def bench_score(quick: bool, arch: str = "cpu", baseline: str | None = None) -> 
     import numpy as np
 
     bs = load_module("bench_score")
+    from scenebot.artifacts.mesh import decimate
     from scenebot.score.candidates import sample_candidates
     from scenebot.score.config import ScoreConfig
     from scenebot.score.kernel import init_taichi
-    from scenebot.score.mesh import decimate
 
     got = init_taichi("cpu" if arch == "cpu" else "auto")
     rng = np.random.default_rng(0)
@@ -359,7 +359,8 @@ def bench_localize(quick: bool) -> list[Row]:
     t0 = time.perf_counter()
     index = DescriptorIndex(bigmap.descriptors, trees=4, checks=checks)
     build_s = time.perf_counter() - t0
-    t_fl, _ = timed(lambda: match_to_map(q, index, bigmap, knn=6, ratio=0.8), reps)
+    loc = LocalizeConfig()
+    t_fl, _ = timed(lambda: match_to_map(q, index, bigmap, knn=loc.knn, ratio=loc.ratio), reps)
     bf = cv2.BFMatcher(cv2.NORM_L2)
     qf, mf = q.astype(np.float32), bigmap.descriptors.astype(np.float32)
     t_bf, exact = timed(lambda: bf.knnMatch(qf, mf, k=1), 1 if quick else 3)
@@ -511,7 +512,8 @@ def bench_dense(quick: bool, arch: str = "cpu") -> list[Row]:
     bd = load_module("bench_dense")
     from scenebot.dense.config import PatchMatchConfig
     from scenebot.dense.evaluate import depth_map_metrics
-    from scenebot.dense.patchmatch import PatchMatchSolver, init_taichi
+    from scenebot.dense.patchmatch import PatchMatchSolver
+    from scenebot.taichi_setup import init_taichi
 
     got = init_taichi(arch, 2 if arch == "cpu" else -1)
     w, h = (320, 240) if quick else (640, 480)

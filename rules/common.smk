@@ -1,5 +1,6 @@
 # Helpers shared by all rules: config validation, stage parameters, code inputs.
 import json
+import shlex
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -128,6 +129,29 @@ def captures_until(wildcards):
     if PHOTOS and r == 0:  # the photo files as the sfm stage reads them
         return [str(p) for p in photo_files(CFG.photos.folder)]
     return [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(r + 1)]
+
+
+def options(**paths):
+    """Command-line options of a stage's files, ``--name path ...`` (quoted); an empty list or
+    None leaves the option out."""
+    out = []
+    for name, value in paths.items():
+        values = [value] if isinstance(value, (str, Path)) else list(value or [])
+        if values:
+            out.append(
+                f"--{name.replace('_', '-')} "
+                + " ".join(shlex.quote(str(v)) for v in values)
+            )
+    return " ".join(out)
+
+
+def sfm_photo_options(wildcards):
+    """The sfm stage's photos: round 0 from the photo folder (``robot: photos``), else the
+    capture folders of rounds 0..r."""
+    if PHOTOS and int(wildcards.r) == 0:
+        return options(photo_folder=CFG.photos.folder)
+    logs = [Path(f) for f in captures_until(wildcards)]
+    return options(capture_dirs=[f.parent for f in logs])
 
 
 def image_root(scene_dir):

@@ -36,10 +36,16 @@ rule sfm:
     params:
         py=PY,
         cfg=stage_params("sfm", "photos"),
-        scene_dir=lambda w, output: Path(output.report).parents[2],
+        database=f"{RESULTS}/sfm_db/database.db",  # the scene's features and matches, kept
+        photos=sfm_photo_options,  # the capture folders of rounds 0..r, or the photo folder
+        previous=lambda w: options(  # round r-1's map, continued from where it holds one
+            previous_model=[f"{round_dir(int(w.r) - 1)}/sfm"] if int(w.r) > 0 else []
+        ),
+        model=lambda w, output: Path(output.report).parent,
     shell:
-        "{params.py:q} -m scenebot sfm --params {params.cfg:q} "
-        "--scene-dir {params.scene_dir:q} --round {wildcards.r} 2> >(tee {log:q} >&2)"
+        "{params.py:q} -m scenebot sfm --params {params.cfg:q} --database {params.database:q} "
+        "{params.photos} {params.previous} --model-dir {params.model:q} "
+        "2> >(tee {log:q} >&2)"
 
 
 rule mesh:
@@ -48,7 +54,8 @@ rule mesh:
         model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
     output:
         mesh=f"{RESULTS}/round_{{r}}/mesh.ply",
-        freespace=multiext(f"{RESULTS}/round_{{r}}/freespace", ".json", ".npz"),
+        freespace_json=f"{RESULTS}/round_{{r}}/freespace.json",
+        freespace_npz=f"{RESULTS}/round_{{r}}/freespace.npz",
         picture=report(
             f"{RESULTS}/round_{{r}}/freespace.png",
             caption="../report/freespace.rst",
@@ -64,10 +71,12 @@ rule mesh:
     params:
         py=PY,
         cfg=stage_params("mesh"),
-        round_dir=lambda w, output: Path(output.mesh).parent,
+        sfm=lambda w, input: Path(input.model[0]).parent,
     shell:
-        "{params.py:q} -m scenebot mesh --params {params.cfg:q} "
-        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+        "{params.py:q} -m scenebot mesh --params {params.cfg:q} --sfm-dir {params.sfm:q} "
+        "--mesh-ply {output.mesh:q} --freespace-json {output.freespace_json:q} "
+        "--freespace-npz {output.freespace_npz:q} --freespace-png {output.picture:q} "
+        "2> >(tee {log:q} >&2)"
 
 
 rule score:
@@ -99,10 +108,12 @@ rule score:
     params:
         py=PY,
         cfg=stage_params("score"),
-        round_dir=lambda w, output: Path(output.candidates).parent,
+        sfm=lambda w, input: Path(input.model[0]).parent,
     shell:
-        "{params.py:q} -m scenebot score --params {params.cfg:q} "
-        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+        "{params.py:q} -m scenebot score --params {params.cfg:q} --sfm-dir {params.sfm:q} "
+        "--mesh-ply {input.mesh:q} --freespace-npz {input.freespace:q} "
+        "--candidates-csv {output.candidates:q} --views-png {output.views:q} "
+        "2> >(tee {log:q} >&2)"
 
 
 rule goals:
@@ -129,10 +140,16 @@ rule goals:
     params:
         py=PY,
         cfg=stage_params("goals"),
-        round_dir=lambda w, output: Path(output.goals).parent,
+        sfm=lambda w, input: Path(input.model[0]).parent,
+        previous=lambda w, input: options(
+            previous_goals_json=input.previous[:1],
+            previous_freespace_npz=input.previous[1:],
+        ),
     shell:
-        "{params.py:q} -m scenebot goals --params {params.cfg:q} "
-        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+        "{params.py:q} -m scenebot goals --params {params.cfg:q} --sfm-dir {params.sfm:q} "
+        "--candidates-csv {input.candidates:q} --freespace-npz {input.freespace:q} "
+        "{params.previous} --goals-json {output.goals:q} --goals-png {output.picture:q} "
+        "2> >(tee {log:q} >&2)"
 
 
 # A checkpoint: the last decision of a round. Whether the campaign goes on to another round
@@ -160,7 +177,8 @@ checkpoint plan:
     params:
         py=PY,
         cfg=stage_params("plan", "sim"),
-        round_dir=lambda w, output: Path(output.paths).parent,
+        sfm=lambda w, input: Path(input.model[0]).parent,
     shell:
-        "{params.py:q} -m scenebot plan --params {params.cfg:q} "
-        "--round-dir {params.round_dir:q} 2> >(tee {log:q} >&2)"
+        "{params.py:q} -m scenebot plan --params {params.cfg:q} --sfm-dir {params.sfm:q} "
+        "--goals-json {input.goals:q} --navgrid-npz {output.navgrid:q} "
+        "--paths-json {output.paths:q} --plot-png {output.picture:q} 2> >(tee {log:q} >&2)"

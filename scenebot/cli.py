@@ -10,6 +10,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
@@ -25,11 +26,11 @@ def _config(args) -> object:
 
 
 def cmd_capture(args) -> int:
-    from scenebot.capture import run_capture
+    from scenebot.capture.stage import run_capture
 
     cfg = _config(args)
     if args.round > 0:
-        from scenebot.adaptive import run_adaptive
+        from scenebot.capture.adaptive import run_adaptive
 
         if not args.previous:
             raise ValueError("capture --round >= 1 needs --previous results/<scene>/round_XXX")
@@ -43,67 +44,82 @@ def cmd_capture(args) -> int:
     return 0
 
 
-def cmd_sfm(args) -> int:
-    from scenebot.sfm.stage import inputs_for_round, run
+# The files each stage reads and writes, one option per field of its inputs and outputs
+# dataclasses (``sfm_dir`` -> ``--sfm-dir``; ``?`` optional, ``*`` a list): the rule names every
+# file. Written here rather than read from the dataclasses, so that building the parser imports
+# no stage (tests/test_cli.py checks that the two agree).
+STAGE_FILES = {
+    "sfm": ("database", "capture_dirs*", "photo_folder?", "previous_model?", "model_dir"),
+    "mesh": ("sfm_dir", "mesh_ply", "freespace_json", "freespace_npz", "freespace_png?"),
+    "score": ("sfm_dir", "mesh_ply", "freespace_npz", "candidates_csv", "views_png?"),
+    "goals": ("candidates_csv", "freespace_npz", "sfm_dir?", "previous_goals_json?",
+              "previous_freespace_npz?", "goals_json", "goals_png?"),
+    "plan": ("sfm_dir", "goals_json", "navgrid_npz", "paths_json", "plot_png?"),
+}  # fmt: skip
 
-    cfg = _config(args)
-    folder = cfg.photos.folder if cfg.robot == "photos" and args.round == 0 else None
-    inputs, outputs = inputs_for_round(Path(args.scene_dir), args.round, photo_folder=folder)
-    print(json.dumps(run(cfg.sfm, inputs, outputs), default=str)[:2000])
+
+def add_files(parser: argparse.ArgumentParser, names: tuple[str, ...]) -> None:
+    """The options of a stage's files (:data:`STAGE_FILES`)."""
+    for name in names:
+        field = name.rstrip("?*")
+        parser.add_argument(
+            "--" + field.replace("_", "-"),
+            dest=field,
+            type=Path,
+            required=not name.endswith(("?", "*")),
+            nargs="*" if name.endswith("*") else None,
+            metavar="PATH",
+        )
+
+
+def files(args, cls: type):
+    """A stage's inputs or outputs dataclass from the options :func:`add_files` made."""
+    given = {f.name: getattr(args, f.name) for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in given.items() if v is not None})
+
+
+def cmd_sfm(args) -> int:
+    from scenebot.sfm.stage import SfmInputs, SfmOutputs, run
+
+    cfg, inputs = _config(args), files(args, SfmInputs)
+    prev = inputs.previous_model  # round r-1's map, when it holds one
+    if prev is not None and not (prev / "images.bin").exists():
+        inputs.previous_model = None
+    print(json.dumps(run(cfg.sfm, inputs, files(args, SfmOutputs)), default=str)[:2000])
     return 0
 
 
 def cmd_mesh(args) -> int:
-    from scenebot.score.stage import MeshInputs, MeshOutputs, run_mesh
+    from scenebot.mesh.stage import MeshInputs, MeshOutputs, run
 
-    cfg, r = _config(args), Path(args.round_dir)
-    outs = MeshOutputs(
-        r / "mesh.ply", r / "freespace.json", r / "freespace.npz", r / "freespace.png"
-    )
-    print(json.dumps(run_mesh(cfg.mesh, MeshInputs(r / "sfm"), outs), default=str))
+    cfg = _config(args)
+    print(json.dumps(run(cfg.mesh, files(args, MeshInputs), files(args, MeshOutputs)), default=str))
     return 0
 
 
 def cmd_score(args) -> int:
-    from scenebot.score.stage import ScoreInputs, ScoreOutputs, run_score
+    from scenebot.score.stage import ScoreInputs, ScoreOutputs, run
 
-    cfg, r = _config(args), Path(args.round_dir)
-    inputs = ScoreInputs(r / "sfm", r / "mesh.ply", r / "freespace.npz")
-    outs = ScoreOutputs(r / "candidates.csv", r / "score_views.png")
-    print(json.dumps(run_score(cfg.score, inputs, outs), default=str))
+    cfg = _config(args)
+    summary = run(cfg.score, files(args, ScoreInputs), files(args, ScoreOutputs))
+    print(json.dumps(summary, default=str))
     return 0
 
 
-def previous_round_dir(round_dir: Path) -> Path | None:
-    """``round_{r-1}`` beside ``round_{r}``; None for round 0 or a folder not so named."""
-    name = Path(round_dir).name
-    if not name.startswith("round_") or not name[6:].isdigit() or int(name[6:]) == 0:
-        return None
-    return Path(round_dir).parent / f"round_{int(name[6:]) - 1:03d}"
-
-
 def cmd_goals(args) -> int:
-    from scenebot.score.stage import GoalsInputs, GoalsOutputs, run_goals
+    from scenebot.goals.stage import GoalsInputs, GoalsOutputs, run
 
-    cfg, r = _config(args), Path(args.round_dir)
-    prev = previous_round_dir(r)
-    inputs = GoalsInputs(r / "candidates.csv", r / "freespace.npz", r / "sfm",
-                         None if prev is None else prev / "goals.json",
-                         None if prev is None else prev / "freespace.npz")  # fmt: skip
-    print(json.dumps(run_goals(cfg.goals, inputs, GoalsOutputs(r / "goals.json", r / "goals.png"))))
+    cfg = _config(args)
+    print(json.dumps(run(cfg.goals, files(args, GoalsInputs), files(args, GoalsOutputs))))
     return 0
 
 
 def cmd_plan(args) -> int:
     from scenebot.plan.stage import PlanInputs, PlanOutputs, run
 
-    cfg, r = _config(args), Path(args.round_dir)
-    doc = run(
-        cfg.plan,
-        PlanInputs(r / "sfm", r / "goals.json"),
-        PlanOutputs(r / "navgrid.npz", r / "paths.json", r / "navgrid.png"),
-        camera_offset_m=cfg.camera_mount(),
-    )
+    cfg = _config(args)
+    doc = run(cfg.plan, files(args, PlanInputs), files(args, PlanOutputs),
+              camera_offset_m=cfg.camera_mount())  # fmt: skip
     print(json.dumps(doc, default=str)[:2000])
     return 0
 
@@ -188,13 +204,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--no-progress", action="store_true")
     c.set_defaults(func=cmd_capture)
 
-    m = sub.add_parser("sfm", help="structure from motion of rounds 0..r (robot frame)")
-    with_config(m)
-    m.add_argument("--scene-dir", required=True, help="results/<scene>")
-    m.add_argument("--round", type=int, default=0)
-    m.set_defaults(func=cmd_sfm)
-
     for name, func, text in (
+        ("sfm", cmd_sfm, "structure from motion of rounds 0..r (robot frame)"),
         ("mesh", cmd_mesh, "Poisson mesh and free space of a round's map"),
         ("score", cmd_score, "random candidates scored by the rendering-quality heuristic"),
         ("goals", cmd_goals, "the best goals; whether exploration is complete"),
@@ -202,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
     ):
         sp = sub.add_parser(name, help=text)
         with_config(sp)
-        sp.add_argument("--round-dir", required=True, help="results/<scene>/round_XXX")
+        add_files(sp, STAGE_FILES[name])
         sp.set_defaults(func=func)
 
     d = sub.add_parser("dense", help="dense multi-view stereo and fusion of a map")

@@ -19,7 +19,6 @@ from typing import Any, Literal
 import yaml
 from pydantic import (
     BaseModel,
-    ConfigDict,
     Field,
     ValidationError,
     ValidationInfo,
@@ -28,18 +27,17 @@ from pydantic import (
 
 from scenebot.dense.config import DenseConfig
 from scenebot.evaluate.config import EvaluateConfig
+from scenebot.goals.config import GoalsConfig
 from scenebot.localize.config import LocalizeConfig
+from scenebot.mesh.config import MeshConfig
 from scenebot.plan.config import PlanConfig
 from scenebot.robot.nxt.config import EmulatorConfig, NxtConfig
-from scenebot.score.config import GoalsConfig, MeshConfig, ScoreConfig
+from scenebot.score.config import ScoreConfig
+from scenebot.settings import Settings
 from scenebot.sfm.config import SfmConfig
 from scenebot.tour.config import TourConfig
 
 SCHEMA_PATH = Path(__file__).with_name("config.schema.json")
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
 
 def _received(info: ValidationInfo, *sections: str) -> bool:
@@ -50,7 +48,7 @@ def _received(info: ValidationInfo, *sections: str) -> bool:
     return received is None or all(s in received for s in sections)
 
 
-class StartPose(_Model):
+class StartPose(Settings):
     """Robot start pose in the world frame (m, degrees counter-clockwise from +x)."""
 
     x: float
@@ -58,7 +56,7 @@ class StartPose(_Model):
     theta_deg: float = 0.0
 
 
-class WorldConfig(_Model):
+class WorldConfig(Settings):
     """The simulated world: a built-in scene or a textured mesh file."""
 
     builtin: Literal["office", "flat"] | None = Field(
@@ -84,7 +82,7 @@ class WorldConfig(_Model):
         return self
 
 
-class CameraConfig(_Model):
+class CameraConfig(Settings):
     """The robot's camera."""
 
     width: int = Field(640, ge=32, le=4096, description="Image width (px).")
@@ -102,7 +100,7 @@ class CameraConfig(_Model):
     noise_sigma: float = Field(1.5, ge=0, description="Sensor noise (8-bit levels).")
 
 
-class BodyConfig(_Model):
+class BodyConfig(Settings):
     """Robot body and drive train."""
 
     radius_m: float = Field(0.15, gt=0, description="Circular footprint radius (m).")
@@ -115,7 +113,7 @@ class BodyConfig(_Model):
     turn_speed_deg_s: float = Field(240.0, gt=0, description="Wheel speed when turning.")
 
 
-class SlipConfig(_Model):
+class SlipConfig(Settings):
     """Wheel slip: true motion = commanded x (1 - slip + noise); mostly on turns."""
 
     drive: float = Field(0.02, ge=0, lt=1, description="Mean slip when driving straight.")
@@ -127,7 +125,7 @@ class SlipConfig(_Model):
     )
 
 
-class SensorConfig(_Model):
+class SensorConfig(Settings):
     """Compass, ultrasonic rangefinder, bumpers, stall detection."""
 
     compass_noise_deg: float = Field(1.0, ge=0)
@@ -150,7 +148,7 @@ class SensorConfig(_Model):
     stall_min_progress_deg: float = Field(3.0, gt=0)
 
 
-class SimConfig(_Model):
+class SimConfig(Settings):
     """The simulated robot."""
 
     camera: CameraConfig = CameraConfig()
@@ -161,7 +159,7 @@ class SimConfig(_Model):
     photo_time_s: float = Field(1.5, ge=0, description="Simulated time per photo (s).")
 
 
-class ExplorationConfig(_Model):
+class ExplorationConfig(Settings):
     """Round 0: random exploration (paper IV.A)."""
 
     photos: int = Field(100, ge=1, description="Photos to take in round 0.")
@@ -184,7 +182,7 @@ class ExplorationConfig(_Model):
         return self
 
 
-class FollowConfig(_Model):
+class FollowConfig(Settings):
     """Settings of path following."""
 
     node_reached_m: float = Field(
@@ -309,7 +307,7 @@ class FollowConfig(_Model):
     )
 
 
-class AdaptiveConfig(_Model):
+class AdaptiveConfig(Settings):
     """Adaptive capture (rounds >= 1): drive to the goals of the previous round's map and take
     the missing photos there."""
 
@@ -339,7 +337,7 @@ class AdaptiveConfig(_Model):
     )
 
 
-class PhotosConfig(_Model):
+class PhotosConfig(Settings):
     """Bring-your-own photos (``robot: photos``)."""
 
     folder: Path | None = Field(
@@ -359,7 +357,7 @@ ROBOT_SECTIONS: dict[str, tuple[str, ...]] = {
 """The config sections each ``robot:`` backend reads."""
 
 
-class Config(_Model):
+class Config(Settings):
     """A scenebot campaign."""
 
     scene: str = Field(

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from scenebot.adaptive import goal_headings, map_end_pose
 from scenebot.campaign import summarize
+from scenebot.capture.adaptive import goal_headings, map_end_pose
 from scenebot.config import AdaptiveConfig, Config
 from scenebot.plan import PlanConfig, build_navgrid
 from scenebot.plan.navgrid import snap_to_free
@@ -204,13 +204,13 @@ def test_map_end_pose_is_the_robot_behind_the_last_camera(tmp_path):
 def test_replanning_moves_a_goal_off_a_freshly_marked_obstacle():
     """A bump near the goal marks a disk over it; the snapping planner still plans, to the
     nearest free cell, instead of giving the goal up."""
-    from scenebot.adaptive import SnappingPlanner
+    from scenebot.capture.adaptive import SnappingPlanner
     from scenebot.plan.path import GridPlanner, PlanFailure
 
     grid, _ = _grid()
     start, goal = np.array([0.8, 0.8]), np.array([3.2, 0.8])
-    plain = GridPlanner(grid)
-    snapping = SnappingPlanner(GridPlanner(grid), 0.3)
+    plain = GridPlanner(grid, PlanConfig().simplify_factor)
+    snapping = SnappingPlanner(GridPlanner(grid, PlanConfig().simplify_factor), 0.3)
     for p in (plain, snapping):
         p.mark_obstacle(goal + np.array([0.05, 0.0]), 0.15)
     assert isinstance(plain(start, goal), PlanFailure)
@@ -228,10 +228,10 @@ def test_bump_marks_that_wall_the_robot_in_are_forgotten():
 
     grid, _ = _grid()
     start, goal = np.array([0.8, 0.8]), np.array([3.2, 3.2])
-    planner = GridPlanner(grid)
+    planner = GridPlanner(grid, PlanConfig().simplify_factor)
     for a in np.linspace(0, 2 * np.pi, 12, endpoint=False):  # a ring of marks at 0.4 m
         planner.mark_obstacle(start + 0.4 * np.array([np.cos(a), np.sin(a)]), 0.15)
-    walled = plan_path(planner.grid, start, goal)
+    walled = plan_path(planner.grid, start, goal, planner.simplify_factor)
     assert isinstance(walled, PlanFailure) and walled.reason is PlanFailureReason.NO_ROUTE
     path = planner(start, goal)
     assert not isinstance(path, PlanFailure) and planner.forgotten_marks == 1
@@ -248,7 +248,7 @@ def test_an_abandoned_goal_is_replaced_by_the_next_unused_backup():
     never tried again; goal 2 is skipped by the plan and costs no backup."""
     from types import SimpleNamespace
 
-    from scenebot.adaptive import unused_backups, visit_goals
+    from scenebot.capture.adaptive import unused_backups, visit_goals
     from scenebot.robot.base import Pose2D
 
     def goal(c):

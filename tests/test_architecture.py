@@ -120,8 +120,8 @@ def plant(root: Path, module: str, statement: str) -> None:
     ("module", "statement", "reported"),
     [
         # the robot layer reaches up into a stage (what robot/nxt/backend.py used to do)
-        ("robot/nxt/backend.py", "from scenebot.capture import run_capture",
-         "scenebot.robot.nxt.backend -> scenebot.capture"),
+        ("robot/nxt/backend.py", "from scenebot.capture.stage import run_capture",
+         "scenebot.robot.nxt.backend -> scenebot.capture.stage"),
         # a shared module imports a stage
         ("geometry.py", "import scenebot.sfm.stage", "scenebot.geometry -> scenebot.sfm.stage"),
         # a new crossing between two stages, not in the contract's list
@@ -149,6 +149,7 @@ def test_a_module_outside_every_layer_breaks_the_contract(package_copy):
 
 def test_a_planted_circle_is_found(package_copy):
     # adaptive imports explore; explore importing adaptive back closes a circle
-    plant(package_copy, "explore.py", "from scenebot.adaptive import goal_headings")
+    plant(package_copy, "capture/explore.py", "from scenebot.capture.adaptive import goal_headings")
     found = circles(_deps.import_graph(package_copy / "scenebot"))
-    assert ["scenebot.adaptive", "scenebot.explore", "scenebot.adaptive"] in found
+    loop = ["scenebot.capture.adaptive", "scenebot.capture.explore", "scenebot.capture.adaptive"]
+    assert loop in found

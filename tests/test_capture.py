@@ -7,7 +7,7 @@ import stat
 
 import pytest
 
-from scenebot.capture import run_capture
+from scenebot.capture.stage import run_capture
 from scenebot.capturelog import read_log
 from scenebot.config import validate_config
 from scenebot.scene.loader import SceneLoadError

@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from scenebot.capture import run_capture
+from scenebot.capture.session import archive_previous
+from scenebot.capture.stage import run_capture
 from scenebot.capturelog import CaptureLog, photo_records, read_log
-from scenebot.capturesession import archive_previous
 from scenebot.config import validate_config
 from scenebot.robot.base import Health, Pose2D, Robot, SensorReading
 
@@ -157,11 +157,11 @@ class StillRobot(Robot):
 
 def test_the_follower_logs_nav_photos_relative_to_the_capture_folder(tmp_path, monkeypatch):
     """An archived log must point at the archived nav photos, not at the live folder."""
-    from scenebot.follow import PathFollower
+    from scenebot.capture.follow import PathFollower
     from scenebot.localize.locate import FailureReason, LocalizationFailure
 
     class Cam:
-        def capture(self, dest, timeout_s=30.0):
+        def capture(self, dest, timeout_s=None):
             Path(dest).write_bytes(jpeg_bytes(1))
             return Path(dest)
 
@@ -303,7 +303,7 @@ HOLDER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from scenebot.capturesession import capture_lock
+    from scenebot.capture.session import capture_lock
     with capture_lock(Path(sys.argv[1])):
         print("locked", flush=True)
         time.sleep(120)
@@ -322,7 +322,7 @@ def _hold_lock(folder: Path) -> subprocess.Popen:
 
 
 def test_a_second_capture_of_a_round_is_refused_naming_the_holder(tmp_path):
-    from scenebot.capturesession import CaptureLockedError
+    from scenebot.capture.session import CaptureLockedError
 
     cap = tmp_path / "round_000" / "capture"
     run_capture(small_cfg(), cap, progress=False)
@@ -345,7 +345,7 @@ def test_a_lock_left_by_a_killed_capture_is_taken_over_with_a_warning(tmp_path, 
     holder = _hold_lock(cap)
     os.kill(holder.pid, signal.SIGKILL)  # kill -9 leaves no stuck lock
     holder.wait()
-    with caplog.at_level("WARNING", logger="scenebot.capture"):
+    with caplog.at_level("WARNING", logger="scenebot.capture.stage"):
         run_capture(small_cfg(), cap, progress=False)
     assert any(
         f"pid {holder.pid}" in r.getMessage() and "taking it over" in r.getMessage()
@@ -355,7 +355,7 @@ def test_a_lock_left_by_a_killed_capture_is_taken_over_with_a_warning(tmp_path, 
 
 
 def test_a_lock_held_on_another_host_is_not_taken_over(tmp_path):
-    from scenebot.capturesession import LOCK_NAME, CaptureLockedError
+    from scenebot.capture.session import LOCK_NAME, CaptureLockedError
 
     cap = tmp_path / "capture"
     cap.mkdir()
@@ -367,7 +367,7 @@ def test_a_lock_held_on_another_host_is_not_taken_over(tmp_path):
 
 
 def test_the_lock_is_released_when_the_capture_ends(tmp_path):
-    from scenebot.capturesession import capture_lock
+    from scenebot.capture.session import capture_lock
 
     cap = tmp_path / "capture"
     run_capture(small_cfg(), cap, progress=False)

@@ -11,9 +11,10 @@ import json, time
 import cv2, numpy as np
 from scenebot.dense.config import PatchMatchConfig
 from scenebot.dense.evaluate import depth_map_metrics
-from scenebot.dense.patchmatch import PatchMatchSolver, StereoView, init_taichi
+from scenebot.dense.patchmatch import PatchMatchSolver, StereoView
+from scenebot.taichi_setup import init_taichi
 from scenebot.testing.dense import box_room_scene, intrinsics, look_at_pose, render_view
-arch = init_taichi("gpu")
+arch = init_taichi("gpu", -1)
 sc = box_room_scene()
 K = intrinsics(320, 240)
 views, truth = [], []

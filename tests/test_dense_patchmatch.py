@@ -6,7 +6,8 @@ import pytest
 
 from scenebot.dense.config import PatchMatchConfig
 from scenebot.dense.evaluate import depth_map_metrics, normal_angle_deg
-from scenebot.dense.patchmatch import PatchMatchSolver, StereoView, init_taichi
+from scenebot.dense.patchmatch import PatchMatchSolver, StereoView
+from scenebot.taichi_setup import init_taichi
 from scenebot.testing.dense import box_room_scene, intrinsics, look_at_pose, render_view
 
 W, H = 256, 192
@@ -14,7 +15,7 @@ W, H = 256, 192
 
 @pytest.fixture(scope="module")
 def scene_views():
-    init_taichi("cpu", num_threads=2)
+    init_taichi("cpu", 2)
     sc = box_room_scene()
     K = intrinsics(W, H)
     views, truth = [], []
@@ -118,7 +119,7 @@ def test_consistency_count_against_truth(scene_views):
 
 def test_fronto_parallel_plane_exact():
     """A single textured wall facing the camera: depth exact to 0.5 %, normal (0, 0, -1)."""
-    init_taichi("cpu", num_threads=2)
+    init_taichi("cpu", 2)
     sc = box_room_scene(room=(-1.0, -3.0, 2.0, 3.0), boxes=[])
     K = intrinsics(160, 120)
     views, truth = [], []

@@ -7,18 +7,41 @@ import numpy as np
 import pytest
 
 from scenebot.dense.config import PlaneFillConfig
-from scenebot.dense.planefill import (
-    backproject,
-    detect_planes,
-    fill_view,
-    plane_evidence,
-    validate_planes,
-)
+from scenebot.dense.planes.detect import detect_planes, detect_settings
+from scenebot.dense.planes.fill import fill_view, fill_view_settings
+from scenebot.dense.planes.geometry import backproject
+from scenebot.dense.planes.phantoms import plane_evidence, validate_planes
 
 W, H, F = 160, 120, 100.0
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
 R, T = np.eye(3), np.zeros(3)  # camera at the origin looking along +z
 NORMAL = np.zeros((H, W, 3), np.float32)
+
+CFG = PlaneFillConfig()
+#: the settings of these tests unless they say otherwise: the config's, but for extents
+#: closed over 2 cells, planes kept as fitted (snap_deg 0) and the same_plane fill rule with
+#: the neighbours' planes
+TEST_CFG = PlaneFillConfig(
+    extent_close_cells=2, snap_deg=0.0, fill_rule="same_plane", fill_planes="neighbours"
+)
+#: the settings of carved_hulls and occluded_fill (the config's)
+HULLS = dict(
+    distance_m=CFG.label_distance_m,
+    rel_distance=CFG.label_rel_distance,
+    min_rays=CFG.carve_min_rays,
+)
+OCCLUSION = dict(cell_px=CFG.cell_px, min_points=CFG.occlusion_min_points)
+EDGE = CFG.sparse_veto_max_edge_px  # sparse_contradicted_fill's longest triangle edge
+
+
+def detect_kw(**kw) -> dict:
+    """detect_planes' settings as the stage derives them from TEST_CFG, with the test's own."""
+    return {**detect_settings(TEST_CFG), **kw}
+
+
+def fill_kw(**kw) -> dict:
+    """fill_view's settings as the stage derives them from TEST_CFG, with the test's own."""
+    return {**fill_view_settings(TEST_CFG), **kw}
 
 
 def wall(depth=3.0) -> np.ndarray:
@@ -27,14 +50,14 @@ def wall(depth=3.0) -> np.ndarray:
 
 def planes_of(*maps):
     pts = np.concatenate([backproject(d, K, R, T)[d > 0] for d in maps])
-    return detect_planes(pts, distance_m=0.01, min_share=0.05, cell_m=0.1)
+    return detect_planes(pts, **detect_kw(distance_m=0.01, min_share=0.05, cell_m=0.1))
 
 
 def test_two_noisy_planes_are_found_once_each():
     rng = np.random.default_rng(0)
     floor = np.c_[rng.uniform(-2, 2, (4000, 2)), rng.normal(-0.35, 0.006, 4000)]
     wallp = np.c_[np.full(3000, 3.0) + rng.normal(0, 0.006, 3000), rng.uniform(-2, 2, (3000, 2))]
-    planes = detect_planes(np.r_[floor, wallp], distance_m=0.01, min_share=0.05)
+    planes = detect_planes(np.r_[floor, wallp], **detect_kw(distance_m=0.01, min_share=0.05))
     assert len(planes) == 2  # the noisy floor is not peeled into slices
     fl, wl = planes
     assert abs(fl.normal[2]) > np.cos(np.radians(1)) and abs(wl.normal[0]) > np.cos(np.radians(1))
@@ -49,7 +72,7 @@ def test_a_plain_patch_of_a_wall_is_filled_with_the_wall():
     d = wall()
     d[50:60, 70:80] = 0  # plain paint: no depth over 30 x 30 cm
     planes = planes_of(d)
-    fd, fn, filled, culled = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0))
+    fd, fn, filled, culled = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw())
     assert filled == 100 and culled == 0
     assert np.allclose(fd[50:60, 70:80], 3.0, atol=1e-3)
     # normals face the camera (negative z in the camera frame)
@@ -62,7 +85,7 @@ def test_fill_stays_within_the_planes_extent():
     d = wall()
     d[40:80, 50:110] = 0
     planes = planes_of(d)
-    fd, _, filled, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0))
+    fd, _, filled, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw())
     assert 0 < filled < 40 * 60
     assert np.all(fd[55:65, 70:90] == 0)
     assert np.allclose(fd[fd > 0], 3.0, atol=1e-3)
@@ -74,7 +97,7 @@ def test_a_plain_face_before_the_wall_is_not_filled_with_the_wall():
     d[30:90, 40:120] = rng.uniform(1.8, 2.2, (60, 80))  # a box's edges, off every plane
     d[34:86, 44:116] = 0  # its plain face
     planes = planes_of(d)
-    fd, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0))
+    fd, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw())
     assert np.all(fd[40:80, 50:110] == 0)  # its middle stays empty
 
 
@@ -82,10 +105,12 @@ def test_depth_behind_a_plane_is_culled_and_replaced():
     d = wall()
     d[60:63, 80:83] = 5.0  # a match through the wall
     planes = planes_of(d)
-    fd, _, filled, culled = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0))
+    fd, _, filled, culled = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw())
     assert culled == 9 and filled == 9
     assert np.allclose(fd[60:63, 80:83], 3.0, atol=1e-3)
-    keep, _, _, culled = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), cull_behind=False)
+    keep, _, _, culled = fill_view(
+        d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw(cull_behind=False)
+    )
     assert culled == 0 and np.all(keep[60:63, 80:83] == 5.0)
 
 
@@ -101,14 +126,17 @@ def test_phantom_planes_are_dropped_and_the_real_wall_kept():
         d[70:100, 100:130][1::2, 1::2] = 4.0
     maps = (transient, steady, steady.copy())
     pts = np.concatenate([backproject(d, K, R, T)[d > 0] for d in maps])
-    planes = detect_planes(pts, distance_m=0.01, min_share=0.005, cell_m=0.1)
+    planes = detect_planes(pts, **detect_kw(distance_m=0.01, min_share=0.005, cell_m=0.1))
     depths = sorted(round(-p.offset / p.normal[2], 2) for p in planes)
     assert depths == [2.0, 3.0, 4.0]
     on = np.zeros(3, np.int64)
     behind = np.zeros(3, np.int64)
     hidden = np.zeros((3, 3), np.int64)
     for d in maps:
-        a, b, c = plane_evidence(d, K, R, T, planes, stride=2)
+        a, b, c = plane_evidence(
+            d, K, R, T, planes, distance_m=CFG.label_distance_m,
+            rel_distance=CFG.label_rel_distance, stride=2,
+        )  # fmt: skip
         on, behind, hidden = on + a, behind + b, hidden + c
     keep, why = validate_planes(planes, on, behind, hidden, max_seen_through=1.0, max_hidden=0.5)
     depth_of = {j: round(-p.offset / p.normal[2], 2) for j, p in enumerate(planes)}
@@ -141,10 +169,10 @@ def test_oriented_ransac_finds_the_steps_not_the_slope_across_them():
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     kw = dict(distance_m=0.015, min_share=0.05, cell_m=0.05)
     slope = 0.0
-    for p in detect_planes(pts, **kw):
+    for p in detect_planes(pts, **detect_kw(**kw)):
         slope = max(slope, min(abs(p.normal[0]), abs(p.normal[2])))
     assert slope > 0.5  # by position alone, a plane at about 45 degrees
-    planes = detect_planes(pts, normals=nrm, normal_deg=30, **kw)
+    planes = detect_planes(pts, normals=nrm, **detect_kw(normal_deg=30, **kw))
     assert len(planes) == 12
     for p in planes:  # every one a tread or a riser
         assert max(abs(p.normal[0]), abs(p.normal[2])) > np.cos(np.radians(2))
@@ -165,18 +193,18 @@ def test_a_plain_corner_is_filled_with_the_planes_that_bound_it():
     """Wall and floor meet; both are measured only along the image border. With the
     bounding-planes rule (and the boundary planes' hulls as extents) each hole pixel lands
     on the plane its ray meets first: wall pixels on the wall, floor pixels on the floor."""
-    from scenebot.dense.planefill import carved_hulls
+    from scenebot.dense.planes.extents import carved_hulls
 
     truth = _room_view()
     d = np.zeros_like(truth)
     d[:8], d[-8:], d[:, :8], d[:, -8:] = truth[:8], truth[-8:], truth[:, :8], truth[:, -8:]
     planes = planes_of(d)
     assert len(planes) == 2
-    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)]), strict=True):
+    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)], **HULLS), strict=True):
         pl.occupied = ext
-    _, _, filled_same, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0))
+    _, _, filled_same, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0), **fill_kw())
     front, _, filled_front, _ = fill_view(
-        d, NORMAL, K, R, T, planes, (0.2, 10.0), bounding_planes=True
+        d, NORMAL, K, R, T, planes, (0.2, 10.0), **fill_kw(bounding_planes=True)
     )
     hole = d == 0
     assert filled_front > filled_same  # holes bounded by two planes are filled too
@@ -188,7 +216,7 @@ def test_a_plain_corner_is_filled_with_the_planes_that_bound_it():
 def test_a_boundary_wall_spans_the_plain_paint_between_its_posters():
     """Posters near the corners of a plain wall: its cells hold only them, the carved hull
     spans the wall between them, and a doorway seen through is carved out."""
-    from scenebot.dense.planefill import carved_hulls
+    from scenebot.dense.planes.extents import carved_hulls
 
     d = wall()
     keep = np.zeros_like(d, bool)
@@ -199,7 +227,7 @@ def test_a_boundary_wall_spans_the_plain_paint_between_its_posters():
     door[:, :] = 0
     door[40:80, 70:90] = 6.0  # the room beyond a doorway in the wall, seen through it
     planes = planes_of(d)
-    (ext,) = carved_hulls(planes, [(d, K, R, T), (door, K, R, T)], stride=1)
+    (ext,) = carved_hulls(planes, [(d, K, R, T), (door, K, R, T)], stride=1, **HULLS)
     pl = planes[0]
     middle = backproject(wall(), K, R, T)[50:70, 40:60].reshape(-1, 3)
     assert not pl.inside(middle).any()  # its cells: the posters only
@@ -212,14 +240,14 @@ def test_a_boundary_wall_spans_the_plain_paint_between_its_posters():
 def test_a_box_face_is_not_widened_past_its_cells():
     """A plane with the room measured behind it (a box face 2 m away before the 3 m wall)
     is no boundary: it keeps its own cells."""
-    from scenebot.dense.planefill import carved_hulls
+    from scenebot.dense.planes.extents import carved_hulls
 
     d = wall()
     d[20:45, 20:45] = 2.0
     d[75:100, 115:140] = 2.0  # two textured corners of a plain box face at 2 m
     planes = planes_of(d)
     face = next(j for j, p in enumerate(planes) if abs(abs(p.offset) - 2.0) < 0.01)
-    exts = carved_hulls(planes, [(d, K, R, T)])
+    exts = carved_hulls(planes, [(d, K, R, T)], **HULLS)
     assert np.array_equal(exts[face], planes[face].occupied)
     wallj = 1 - face
     assert exts[wallj].sum() >= planes[wallj].occupied.sum()
@@ -228,33 +256,38 @@ def test_a_box_face_is_not_widened_past_its_cells():
 def test_a_shadow_plane_a_few_centimetres_off_is_dropped():
     """Three views put the wall at 3.00 m, one (a slightly wrong pose) at 2.94 m: the shadow
     is as large in points as the wall but fewer views support it."""
-    from scenebot.dense.planefill import shadow_planes
+    from scenebot.dense.planes.phantoms import shadow_planes
 
     wall_pts = backproject(wall(3.0), K, R, T).reshape(-1, 3)
     shadow_pts = backproject(wall(2.94), K, R, T).reshape(-1, 3)
-    planes = detect_planes(np.r_[wall_pts, shadow_pts], distance_m=0.01, min_share=0.05)
+    planes = detect_planes(
+        np.r_[wall_pts, shadow_pts], **detect_kw(distance_m=0.01, min_share=0.05)
+    )
     assert len(planes) == 2
     depth = [round(-p.offset / p.normal[2], 2) for p in planes]
     support = np.array([3 if abs(z - 3.0) < 0.01 else 1 for z in depth])
-    why = shadow_planes(planes, support, max_gap_m=0.1)
+    why = shadow_planes(planes, support, max_gap_m=0.1, max_angle_deg=CFG.merge_angle_deg)
     assert [depth[j] for j in why] == [2.94]
-    assert shadow_planes(planes, support, max_gap_m=0.03) == {}  # 6 cm apart: both kept
+    close = shadow_planes(planes, support, max_gap_m=0.03, max_angle_deg=CFG.merge_angle_deg)
+    assert close == {}  # 6 cm apart: both kept
 
 
 def test_a_hole_beside_an_objects_edge_is_left_empty_there():
     """A plain strip of wall next to an object (measured, off every plane): the strip is
     filled with the wall, but not within edge_px of the object, where the hole could as well
     be the object's side."""
-    from scenebot.dense.planefill import carved_hulls
+    from scenebot.dense.planes.extents import carved_hulls
 
     rng = np.random.default_rng(3)
     d = wall()
     d[:, 80:120] = rng.uniform(1.8, 2.2, (H, 40))  # an object before the wall
     d[30:90, 68:80] = 0  # plain wall between them
     planes = planes_of(d)
-    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)]), strict=True):
+    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)], **HULLS), strict=True):
         pl.occupied = ext
-    fd, _, filled, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), bounding_planes=True)
+    fd, _, filled, _ = fill_view(
+        d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw(bounding_planes=True)
+    )
     assert filled > 0
     assert np.allclose(fd[40:80, 68:74], 3.0, atol=1e-3)  # the strip, away from the edge
     assert np.all(fd[40:80, 77:80] == 0)  # within 3 px of the object: empty
@@ -269,8 +302,8 @@ def test_walls_are_snapped_upright_and_floors_flat():
     tilt = np.tan(np.radians(1.5))
     wallp = np.c_[3.0 + tilt * yz[:, 1] + rng.normal(0, 0.003, 3000), yz]
     kw = dict(distance_m=0.02, min_share=0.05, cell_m=0.1)
-    raw = detect_planes(np.r_[floor, wallp], **kw)
-    snapped = detect_planes(np.r_[floor, wallp], snap_deg=3.0, **kw)
+    raw = detect_planes(np.r_[floor, wallp], **detect_kw(**kw))
+    snapped = detect_planes(np.r_[floor, wallp], **detect_kw(snap_deg=3.0, **kw))
     wall_raw = next(p for p in raw if abs(p.normal[0]) > 0.9)
     wall_s = next(p for p in snapped if abs(p.normal[0]) > 0.9)
     floor_s = next(p for p in snapped if abs(p.normal[2]) > 0.9)
@@ -290,7 +323,7 @@ def test_a_wall_fitted_5_degrees_off_stands_upright_with_the_default_snap():
     yz = np.c_[rng.uniform(0, 4, 3000), rng.uniform(-0.35, 2.2, 3000)]
     wallp = np.c_[3.0 + np.tan(np.radians(5.0)) * yz[:, 1] + rng.normal(0, 0.003, 3000), yz]
     kw = dict(distance_m=0.02, min_share=0.05, cell_m=0.1)
-    snapped = detect_planes(np.r_[floor, wallp], snap_deg=PlaneFillConfig().snap_deg, **kw)
+    snapped = detect_planes(np.r_[floor, wallp], **detect_kw(snap_deg=CFG.snap_deg, **kw))
     wall = next(p for p in snapped if abs(p.normal[0]) > 0.9)
     floor_s = next(p for p in snapped if abs(p.normal[2]) > 0.9)
     assert wall.normal @ floor_s.normal == pytest.approx(0.0, abs=1e-9)  # upright
@@ -316,11 +349,14 @@ def test_the_ceiling_is_found_from_few_points_and_spans_the_floor():
     """400 noisy ceiling points in a cloud of 29,000 are too few a share for RANSAC; the
     ceiling search finds them at the highest dense height (not the desk's underside), at
     the peak of their noise, and widens the ceiling to the floor's extent."""
-    from scenebot.dense.planefill import find_ceiling, span_floor
+    from scenebot.dense.planes.ceiling import find_ceiling
+    from scenebot.dense.planes.extents import span_floor
 
     rng = np.random.default_rng(5)
     pts, nrm = _ceiling_cloud(rng, sigma=0.015)
-    planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
+    planes = detect_planes(
+        pts, normals=nrm, **detect_kw(distance_m=0.015, min_share=0.02, cell_m=0.1)
+    )
     assert not any(abs(p.normal[2]) > 0.9 and -p.offset * p.normal[2] > 2 for p in planes)
     cams = np.c_[rng.uniform(-2, 2, (20, 2)), np.zeros(20)]
     ceiling = find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, 100, 0.1, 3, 2)
@@ -335,13 +371,15 @@ def test_the_ceiling_is_found_from_few_points_and_spans_the_floor():
 
 
 def test_no_ceiling_without_its_points_or_with_depth_above_it():
-    from scenebot.dense.planefill import find_ceiling
+    from scenebot.dense.planes.ceiling import find_ceiling
 
     rng = np.random.default_rng(6)
     cams = np.zeros((5, 3))
     for n_ceiling, above in ((0, 0), (40, 0), (400, 300)):
         pts, nrm = _ceiling_cloud(rng, n_ceiling=n_ceiling, above=above)
-        planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
+        planes = detect_planes(
+            pts, normals=nrm, **detect_kw(distance_m=0.015, min_share=0.02, cell_m=0.1)
+        )
         # (the desk underside, below it all, is never taken for the ceiling)
         assert find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, 100, 0.1, 3, 2) is None
 
@@ -352,13 +390,15 @@ def test_a_ceiling_of_50_points_is_found_and_a_smear_of_as_many_is_not():
     and 300 stray points smeared over 30 cm of height (as many in any 3 cm as a ceiling of
     30, but no surface) are not either; the desk below with the walls measured above it is
     never the ceiling."""
-    from scenebot.dense.planefill import find_ceiling
+    from scenebot.dense.planes.ceiling import find_ceiling
 
     cfg = PlaneFillConfig()
     cams = np.zeros((5, 3))
     for n_ceiling, sigma, found in ((50, 0.005, True), (15, 0.005, False), (300, 0.1, False)):
         pts, nrm = _ceiling_cloud(np.random.default_rng(7), n_ceiling=n_ceiling, sigma=sigma)
-        planes = detect_planes(pts, distance_m=0.015, min_share=0.02, cell_m=0.1, normals=nrm)
+        planes = detect_planes(
+            pts, normals=nrm, **detect_kw(distance_m=0.015, min_share=0.02, cell_m=0.1)
+        )
         ceiling = find_ceiling(pts, nrm, planes, cams, 0.015, 30.0, cfg.ceiling_min_points,
                                0.1, 3, 2)  # fmt: skip
         assert (ceiling is not None) is found, (n_ceiling, sigma)
@@ -367,14 +407,18 @@ def test_a_ceiling_of_50_points_is_found_and_a_smear_of_as_many_is_not():
 
 
 def test_of_two_shadow_planes_with_as_many_views_the_one_with_fewer_points_goes():
-    from scenebot.dense.planefill import shadow_planes
+    from scenebot.dense.planes.phantoms import shadow_planes
 
     wall_pts = backproject(wall(3.0), K, R, T).reshape(-1, 3)
     shadow_pts = backproject(wall(2.97), K, R, T).reshape(-1, 3)[::3]
-    planes = detect_planes(np.r_[wall_pts, shadow_pts], distance_m=0.01, min_share=0.05)
+    planes = detect_planes(
+        np.r_[wall_pts, shadow_pts], **detect_kw(distance_m=0.01, min_share=0.05)
+    )
     assert len(planes) == 2
     depth = [round(-p.offset / p.normal[2], 2) for p in planes]
-    why = shadow_planes(planes, np.array([50, 50]), max_gap_m=0.1)
+    why = shadow_planes(
+        planes, np.array([50, 50]), max_gap_m=0.1, max_angle_deg=CFG.merge_angle_deg
+    )
     assert [depth[j] for j in why] == [2.97]
 
 
@@ -383,13 +427,15 @@ def test_an_object_face_the_view_sees_through_neither_culls_nor_fills_it():
     the view measured the wall at 3 m through it: the face is wrong here (the camera stands
     beside the box), so the wall's depth is kept, not culled."""
     d = wall()
-    face = detect_planes(backproject(wall(1.0), K, R, T).reshape(-1, 3), distance_m=0.01,
-                         min_share=0.05)  # fmt: skip
+    face = detect_planes(backproject(wall(1.0), K, R, T).reshape(-1, 3),
+                         **detect_kw(distance_m=0.01, min_share=0.05))  # fmt: skip
     assert len(face) == 1 and not face[0].boundary
-    kept, _, _, culled = fill_view(d, NORMAL, K, R, T, face, (0.5, 10.0), bounding_planes=True)
+    kept, _, _, culled = fill_view(
+        d, NORMAL, K, R, T, face, (0.5, 10.0), **fill_kw(bounding_planes=True)
+    )
     assert culled == 0 and np.array_equal(kept, d)
-    _, _, _, culled = fill_view(d, NORMAL, K, R, T, face, (0.5, 10.0), bounding_planes=True,
-                                max_seen_through=None)  # fmt: skip
+    _, _, _, culled = fill_view(d, NORMAL, K, R, T, face, (0.5, 10.0),
+                                **fill_kw(bounding_planes=True, max_seen_through=None))  # fmt: skip
     assert culled == d.size  # without the check the whole view is culled
 
 
@@ -403,16 +449,18 @@ def test_any_boundary_fills_a_plain_ceiling_above_the_wall():
     with np.errstate(divide="ignore"):
         ceil_z = np.where(ray_y < 0, -1.0 / ray_y, np.inf)
     truth = np.minimum(ceil_z, 3.0).astype(np.float32)
-    planes = detect_planes(backproject(truth, K, R, T).reshape(-1, 3), distance_m=0.01,
-                           min_share=0.05)  # fmt: skip
+    planes = detect_planes(backproject(truth, K, R, T).reshape(-1, 3),
+                           **detect_kw(distance_m=0.01, min_share=0.05))  # fmt: skip
     assert len(planes) == 2
     for p in planes:
         p.boundary = True
     d = truth.copy()
     d[:70] = 0  # plain above row 70 (the ceiling line is at row 27)
     kw = dict(bounding_planes=True, max_seen_through=None)
-    nb, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0), **kw)
-    anyb, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0), any_boundary=True, **kw)
+    nb, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.2, 10.0), **fill_kw(**kw))
+    anyb, _, _, _ = fill_view(
+        d, NORMAL, K, R, T, planes, (0.2, 10.0), **fill_kw(any_boundary=True, **kw)
+    )
     rows = slice(5, 22)  # the ceiling, away from its line with the wall
     assert np.all(nb[rows] == 0)
     assert (anyb[rows] > 0).mean() > 0.9
@@ -428,17 +476,21 @@ def test_a_second_pass_spreads_a_wall_fill_its_first_pass_could_not_reach():
     d[:90] = 0
     planes = planes_of(wall())
     planes[0].boundary = True
-    one, n1, f1, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), bounding_planes=True)
-    two, _, f2, _ = fill_view(one, n1, K, R, T, planes, (0.5, 10.0), bounding_planes=True)
+    one, n1, f1, _ = fill_view(
+        d, NORMAL, K, R, T, planes, (0.5, 10.0), **fill_kw(bounding_planes=True)
+    )
+    two, _, f2, _ = fill_view(
+        one, n1, K, R, T, planes, (0.5, 10.0), **fill_kw(bounding_planes=True)
+    )
     assert f1 > 0 and f2 > 0
     assert (two > 0).sum() == (d > 0).sum() + f1 + f2
     assert np.allclose(two[two > 0], 3.0, atol=1e-3)
     cache: dict = {}  # the passes reuse the rays and plane hits: same result
-    one_c, n1_c, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0), bounding_planes=True,
-                                  cache=cache)  # fmt: skip
+    one_c, n1_c, _, _ = fill_view(d, NORMAL, K, R, T, planes, (0.5, 10.0),
+                                  **fill_kw(bounding_planes=True), cache=cache)  # fmt: skip
     assert "hits" in cache
-    two_c, _, _, _ = fill_view(one_c, n1_c, K, R, T, planes, (0.5, 10.0), bounding_planes=True,
-                               cache=cache)  # fmt: skip
+    two_c, _, _, _ = fill_view(one_c, n1_c, K, R, T, planes, (0.5, 10.0),
+                               **fill_kw(bounding_planes=True), cache=cache)  # fmt: skip
     assert np.array_equal(one_c, one) and np.array_equal(two_c, two)
 
 
@@ -446,36 +498,38 @@ def test_fill_behind_a_surface_other_views_measured_is_emptied():
     """The wall fill spread across a plain box face 1 m before it; other views measured the
     box's texture (the cloud): the fill behind it is emptied, the rest kept; a single stray
     point does not empty anything."""
-    from scenebot.dense.planefill import occluded_fill
+    from scenebot.dense.planes.vetoes import occluded_fill
 
     d = wall()
     filled = np.ones_like(d, bool)
     rng = np.random.default_rng(7)
     box = np.c_[rng.uniform(-0.5, 0.5, (4000, 2)), np.full(4000, 2.0)]  # x, y at z = 2 m
-    bad = occluded_fill(d, filled, K, R, T, box)
+    bad = occluded_fill(d, filled, K, R, T, box, **OCCLUSION)
     v, u = np.mgrid[0:H, 0:W] + 0.5
     inside = (np.abs((u - W / 2) / F * 2.0) < 0.45) & (np.abs((v - H / 2) / F * 2.0) < 0.45)
     outside = (np.abs((u - W / 2) / F * 2.0) > 0.6) | (np.abs((v - H / 2) / F * 2.0) > 0.6)
     assert bad[inside].all() and not bad[outside].any()
     stray = np.array([[0.0, 0.0, 2.0]])
-    assert not occluded_fill(d, filled, K, R, T, stray).any()
-    assert not occluded_fill(d, ~filled, K, R, T, box).any()  # measured pixels stay
+    assert not occluded_fill(d, filled, K, R, T, stray, **OCCLUSION).any()
+    assert not occluded_fill(d, ~filled, K, R, T, box, **OCCLUSION).any()  # measured pixels stay
 
 
 def test_the_floor_before_the_camera_is_filled_nearer_than_the_views_depth_range():
     """The view's depth range comes from its sparse points (the stereo's sampling range);
     the plain floor just before the camera lies nearer than any of them and is filled."""
-    from scenebot.dense.planefill import carved_hulls
+    from scenebot.dense.planes.extents import carved_hulls
 
     truth = _room_view()
     d = np.zeros_like(truth)
     d[:8], d[-8:], d[:, :8], d[:, -8:] = truth[:8], truth[-8:], truth[:, :8], truth[:, -8:]
     planes = planes_of(d)
-    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)]), strict=True):
+    for pl, ext in zip(planes, carved_hulls(planes, [(d, K, R, T)], **HULLS), strict=True):
         pl.occupied = ext
     near = (d == 0) & (truth < 1.5)
     assert near.sum() > 500
-    fd, _, _, _ = fill_view(d, NORMAL, K, R, T, planes, (1.5, 10.0), bounding_planes=True)
+    fd, _, _, _ = fill_view(
+        d, NORMAL, K, R, T, planes, (1.5, 10.0), **fill_kw(bounding_planes=True)
+    )
     assert (fd[near] > 0).mean() > 0.8
     assert np.allclose(fd[near][fd[near] > 0], truth[near][fd[near] > 0], rtol=1e-3)
 
@@ -499,41 +553,44 @@ def test_fill_that_the_views_own_sfm_points_contradict_is_emptied():
     """The wall fill (3 m) painted across a box at 1 m that stereo missed; the view's own
     SfM points on the box lie 2 m before the fill: the fill between them is emptied, the
     wall's fill beyond the box is kept, and measured pixels are never touched."""
-    from scenebot.dense.planefill import sparse_contradicted_fill
+    from scenebot.dense.planes.vetoes import sparse_contradicted_fill
 
     rng = np.random.default_rng(3)
     uv, z, box = _box_observations(rng)
     d = wall()
     filled = np.ones_like(d, bool)
-    bad = sparse_contradicted_fill(d, filled, uv, z)
+    bad = sparse_contradicted_fill(d, filled, uv, z, max_edge_px=EDGE)
     v, u = np.mgrid[0:H, 0:W] + 0.5
     inner = (np.abs(u - W / 2) < W / 6 - 8) & (np.abs(v - H / 2) < H / 6 - 8)
     assert bad[inner].mean() > 0.95 and bad[box].mean() > 0.6  # between its features
     far = (np.abs(u - W / 2) > W / 6 + 6) | (np.abs(v - H / 2) > H / 6 + 6)
     assert not bad[far].any()  # the wall around it keeps its fill
-    assert not sparse_contradicted_fill(d, ~filled, uv, z).any()  # measured pixels stay
+    assert not sparse_contradicted_fill(
+        d, ~filled, uv, z, max_edge_px=EDGE
+    ).any()  # measured pixels stay
 
 
 def test_sfm_points_that_agree_with_the_fill_or_one_stray_point_veto_nothing():
     """Every observation on the filled wall at its depth (within 5%): nothing is emptied;
     a single point off the fill empties only its own few pixels."""
-    from scenebot.dense.planefill import sparse_contradicted_fill
+    from scenebot.dense.planes.vetoes import sparse_contradicted_fill
 
     rng = np.random.default_rng(4)
     uv = rng.uniform([0, 0], [W, H], (200, 2))
     d = wall()
     filled = np.ones_like(d, bool)
     z = np.full(len(uv), 3.0) * rng.uniform(0.98, 1.02, len(uv))
-    assert not sparse_contradicted_fill(d, filled, uv, z).any()
+    assert not sparse_contradicted_fill(d, filled, uv, z, max_edge_px=EDGE).any()
     z[0] = 1.0
-    assert 0 < sparse_contradicted_fill(d, filled, uv, z).sum() <= 49
+    assert 0 < sparse_contradicted_fill(d, filled, uv, z, max_edge_px=EDGE).sum() <= 49
 
 
 def test_walls_rise_to_the_ceiling_but_a_doorway_stays_open():
     """A wall measured up to 2.2 m under a ceiling at 2.5 m: every column rises to the
     ceiling; a doorway below its lintel and a column with no cell at all stay empty; a
     floor-parallel plane does not rise."""
-    from scenebot.dense.planefill import Plane, span_to_ceiling
+    from scenebot.dense.planes.extents import span_to_ceiling
+    from scenebot.dense.planes.geometry import Plane
 
     cell = 0.1
     basis = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])  # along the wall, down
@@ -544,7 +601,7 @@ def test_walls_rise_to_the_ceiling_but_a_doorway_stays_open():
                  np.array([0.0, -2.2]), occ.copy(), 1000, boundary=True)  # fmt: skip
     ceiling = Plane(np.array([0, 0, 1.0]), -2.5, np.eye(3)[:2], np.array([0, 0, 2.5]), cell,
                     np.zeros(2), np.ones((1, 1), bool), 80, boundary=True)  # fmt: skip
-    added = span_to_ceiling(wall, ceiling)
+    added = span_to_ceiling(wall, ceiling, max_rise_m=CFG.walls_to_ceiling_m)
     assert added > 0
 
     def on(y, z):
@@ -558,13 +615,14 @@ def test_walls_rise_to_the_ceiling_but_a_doorway_stays_open():
     assert on(0.55, 1.0)  # the old cells kept
     floor = Plane(np.array([0, 0, 1.0]), 0.0, np.eye(3)[:2], np.zeros(3), cell, np.zeros(2),
                   np.ones((5, 5), bool), 500, boundary=True)  # fmt: skip
-    assert span_to_ceiling(floor, ceiling) == 0
+    assert span_to_ceiling(floor, ceiling, max_rise_m=CFG.walls_to_ceiling_m) == 0
 
 
 def test_the_ceiling_reaches_the_walls_it_meets():
     """A ceiling spanned from the floor stops 0.5 m short of a wall (furniture on the floor
     along it); the wall's top edge widens the ceiling to the wall, not past it."""
-    from scenebot.dense.planefill import Plane, span_walls
+    from scenebot.dense.planes.extents import span_walls
+    from scenebot.dense.planes.geometry import Plane
 
     cell = 0.1
     ceiling = Plane(np.array([0, 0, 1.0]), -2.5, np.eye(3)[:2], np.array([0, 0, 2.5]), cell,
@@ -590,7 +648,8 @@ def test_the_floor_reaches_the_walls_that_stand_on_it(nz):
     angles); where the wall's cells reach the floor the floor widens to it, where the wall's
     lowest cells are 1 m up (something stood in front of it) it does not. Either sign of the
     floor's normal: the side away from the cameras decides."""
-    from scenebot.dense.planefill import Plane, span_walls
+    from scenebot.dense.planes.extents import span_walls
+    from scenebot.dense.planes.geometry import Plane
 
     cell = 0.1
     occ = np.zeros((40, 40), bool)

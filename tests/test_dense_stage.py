@@ -40,7 +40,7 @@ def test_end_to_end(capture, tmp_path):
     assert json.loads(out.summary_json.read_text())["num_fused_points"] > 1000
     for name in ("fused_views.png", "depth_normal_mosaic.png", "planes.png", "fused.ply"):
         assert (out.dense_dir / name).stat().st_size > 1000
-    from scenebot.dense.planefill import PLANES_NPZ, load_planes
+    from scenebot.dense.planes.store import PLANES_NPZ, load_planes
 
     planes, centres = load_planes(out.dense_dir / PLANES_NPZ)  # the planes of the summary
     assert len(planes) == len(summary["plane_fill"]["planes"]) and len(centres) == len(views)

@@ -9,11 +9,13 @@ import pytest
 
 from scenebot.dense import workspace as ws
 from scenebot.dense.colmap_io import write_array
+from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.depthmaps import evaluate_depth_maps
 from scenebot.evaluate.metrics import Similarity
 from scenebot.testing.dense import box_room_scene, make_dataset, stereo_rig
 
 W, H = 96, 72
+EVAL = EvaluateConfig()
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +51,7 @@ def test_exact_maps_are_complete_and_right_and_biased_ones_are_not(workspace):
     half = np.ones((H, W), bool)
     half[:, : W // 2] = False
     _write(dense, views, "measured", lambda d: np.where(half, d * 1.05, 0))  # 5% too far
-    out = evaluate_depth_maps(dense, identity, scene)
+    out = evaluate_depth_maps(dense, identity, scene, EVAL.depth_rel_tol, EVAL.depth_map_views)
     fin, mea = out["summary"]["final"], out["summary"]["measured"]
     assert fin["views"] == len(views)
     assert fin["coverage_median"] > 0.99 and fin["within_2pct_median"] > 0.99
@@ -67,10 +69,11 @@ def test_a_wrong_map_frame_counts_against_the_maps(workspace):
     dense, views, scene = workspace
     _write(dense, views, "final", lambda d: d)
     off = Similarity(1.03, np.eye(3), np.zeros(3), len(views), {})
-    fin = evaluate_depth_maps(dense, off, scene)["summary"]["final"]
+    out = evaluate_depth_maps(dense, off, scene, EVAL.depth_rel_tol, EVAL.depth_map_views)
+    fin = out["summary"]["final"]
     assert fin["within_2pct_median"] < 0.05
 
 
 def test_no_depth_maps_is_an_error_naming_the_folder(tmp_path):
     with pytest.raises(FileNotFoundError, match="sparse"):
-        evaluate_depth_maps(tmp_path, None, None)
+        evaluate_depth_maps(tmp_path, None, None, EVAL.depth_rel_tol, EVAL.depth_map_views)

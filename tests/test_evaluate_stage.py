@@ -28,6 +28,7 @@ from scenebot.testing.score import default_intrinsics, write_colmap_model
 from tests.fixtures.rooms import box_room
 
 ECFG = EvaluateConfig(grid_step_m=0.4, headings=6, sample_spacing_m=0.05)
+TAUS = ECFG.thresholds_m  # the default 1, 2, 5 cm
 # the map's robot frame: world = S * R @ robot + T (a yawed, scaled, shifted frame)
 S_TRUE = 1.25
 R_TRUE = Rotation.from_euler("z", 35, degrees=True).as_matrix()
@@ -86,7 +87,7 @@ def test_uniform_weights_give_the_dense_stage_metrics(scene, surf):
     rng = np.random.default_rng(2)
     ref = surf.observable_points
     cloud = ref[rng.random(len(ref)) < 0.5] + rng.normal(0, 0.008, (1, 3))
-    ours = weighted_cloud_metrics(cloud, scene.vertices, scene.triangles, ref)
+    ours = weighted_cloud_metrics(cloud, scene.vertices, scene.triangles, ref, thresholds_m=TAUS)
     theirs = cloud_metrics(cloud, scene.vertices, scene.triangles, ref)
     for tau in ("1cm", "2cm", "5cm"):
         for k in ("accuracy", "completeness", "fscore"):
@@ -95,14 +96,14 @@ def test_uniform_weights_give_the_dense_stage_metrics(scene, surf):
 
 def test_a_perfect_cloud_is_complete_and_a_shifted_one_is_not_accurate(scene, surf):
     ref, w = surf.observable_points, surf.observable_weights
-    m = weighted_cloud_metrics(ref, scene.vertices, scene.triangles, ref, w)
+    m = weighted_cloud_metrics(ref, scene.vertices, scene.triangles, ref, w, thresholds_m=TAUS)
     assert m["1cm"]["accuracy"] == 1.0 and m["1cm"]["completeness"] == 1.0
     # 3 cm off the surface along its normal: inaccurate at 1 and 2 cm, accurate at 5 cm
     from scenebot.evaluate.observable import triangle_normals
 
     n, _ = triangle_normals(scene.vertices, scene.triangles)
     off = ref + 0.03 * n[surf.triangle[surf.observable]]
-    m = weighted_cloud_metrics(off, scene.vertices, scene.triangles, ref, w)
+    m = weighted_cloud_metrics(off, scene.vertices, scene.triangles, ref, w, thresholds_m=TAUS)
     assert m["2cm"]["accuracy"] < 0.02 and m["5cm"]["accuracy"] > 0.98
     assert m["median_error_m"]["accuracy"] == pytest.approx(0.03, abs=0.002)
 
@@ -111,7 +112,9 @@ def test_completeness_is_weighted_by_area(scene, surf):
     ref = surf.observable_points[:1000]
     w = np.ones(len(ref))
     w[:100] = 9.0  # the first 100 samples stand for 900 of 1800 area units
-    m = weighted_cloud_metrics(ref[:100], scene.vertices, scene.triangles, ref, w)
+    m = weighted_cloud_metrics(
+        ref[:100], scene.vertices, scene.triangles, ref, w, thresholds_m=TAUS
+    )
     d = np.linalg.norm(ref[:, None] - ref[None, :100], axis=2).min(1)
     expect = np.sum(w * (d < 0.01)) / w.sum()
     assert m["1cm"]["completeness"] == pytest.approx(expect)

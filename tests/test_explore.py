@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from scenebot.capture.explore import PhotoTaker, best_heading, random_exploration
 from scenebot.capturelog import CaptureLog, read_log
 from scenebot.config import ExplorationConfig
-from scenebot.explore import PhotoTaker, best_heading, random_exploration
 from scenebot.robot.base import Camera, Pose2D
 from scenebot.robot.sim import SimRobot
 from scenebot.scene.office import office
@@ -21,7 +21,7 @@ from tests.fixtures.rooms import box_room
 class PoseOnlyCamera(Camera):
     """Records that a photo was taken (an empty file) without rendering: logic tests only."""
 
-    def capture(self, dest: Path, timeout_s: float = 30.0) -> Path:
+    def capture(self, dest: Path, timeout_s: float | None = None) -> Path:
         dest.parent.mkdir(parents=True, exist_ok=True)
         dest.write_bytes(b"")
         return dest

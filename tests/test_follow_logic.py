@@ -9,8 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from scenebot.capture.follow import (
+    FollowConfig,
+    PathFollower,
+    compose_odometry,
+    robot_pose_from_camera,
+)
 from scenebot.capturelog import CaptureLog, read_log
-from scenebot.follow import FollowConfig, PathFollower, compose_odometry, robot_pose_from_camera
 from scenebot.localize.locate import FailureReason, LocalizationFailure, PoseEstimate
 from scenebot.plan import PlanConfig, build_navgrid
 from scenebot.plan.path import GridPlanner
@@ -24,6 +29,8 @@ from scenebot.robot.base import (
     SensorReading,
 )
 from tests.fixtures.localize import camera_rotation
+
+SIMPLIFY = PlanConfig().simplify_factor
 
 CAM_FWD = 0.1
 
@@ -101,7 +108,7 @@ class NullCamera(Camera):
     def __init__(self):
         self.shots = 0
 
-    def capture(self, dest: Path, timeout_s: float = 30.0) -> Path:
+    def capture(self, dest: Path, timeout_s: float | None = None) -> Path:
         self.shots += 1
         return Path(dest)
 
@@ -152,7 +159,9 @@ def test_follows_a_path_with_turn_slip_and_reaches_the_goal(tmp_path):
     loc = OracleLocalizer(robot)
     cfg = FollowConfig(camera_forward_m=CAM_FWD)
     with CaptureLog(tmp_path / "log.jsonl") as log:
-        f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid()), cfg, tmp_path, log)
+        f = PathFollower(
+            robot, NullCamera(), loc, GridPlanner(_open_grid(), SIMPLIFY), cfg, tmp_path, log
+        )
         path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.5, 3.0]])
         res = f.follow(path, goal_theta=math.pi / 2)
     assert res.reached and res.reason == "reached" and res.localized_at_goal
@@ -175,7 +184,7 @@ def test_without_localization_odometry_drifts_but_the_compass_keeps_the_heading(
             robot,
             NullCamera(),
             loc,
-            GridPlanner(_open_grid()),
+            GridPlanner(_open_grid(), SIMPLIFY),
             FollowConfig(camera_forward_m=CAM_FWD, compass_std_deg=compass_std_deg),
             tmp_path,
             log,
@@ -211,7 +220,7 @@ def test_a_disturbed_compass_reading_is_ignored(tmp_path):
         robot,
         NullCamera(),
         OracleLocalizer(robot, fail=lambda k: True),
-        GridPlanner(_open_grid()),
+        GridPlanner(_open_grid(), SIMPLIFY),
         FollowConfig(camera_forward_m=CAM_FWD, localize_every_m=0.2),
         tmp_path,
         initial_pose=Pose2D(0.0, 0.0, 0.0),
@@ -228,7 +237,7 @@ def test_intermittent_localization_failures_are_retried_after_moving(tmp_path):
         robot,
         NullCamera(),
         loc,
-        GridPlanner(_open_grid()),
+        GridPlanner(_open_grid(), SIMPLIFY),
         FollowConfig(camera_forward_m=CAM_FWD),
         tmp_path,
     )
@@ -240,7 +249,7 @@ def test_intermittent_localization_failures_are_retried_after_moving(tmp_path):
 def test_obstacle_missing_from_map_is_bumped_marked_and_avoided(tmp_path):
     robot = KinematicRobot((0.0, 0.0, 0.0), boxes=[(1.2, -0.4, 1.5, 0.4)])
     loc = OracleLocalizer(robot)
-    planner = GridPlanner(_open_grid())
+    planner = GridPlanner(_open_grid(), SIMPLIFY)
     f = PathFollower(
         robot, NullCamera(), loc, planner, FollowConfig(camera_forward_m=CAM_FWD), tmp_path
     )
@@ -266,7 +275,7 @@ def test_unreachable_goal_is_abandoned_after_k_obstacles_with_reason(tmp_path):
             robot,
             NullCamera(),
             loc,
-            GridPlanner(_open_grid()),
+            GridPlanner(_open_grid(), SIMPLIFY),
             FollowConfig(camera_forward_m=CAM_FWD, max_obstacles=5),
             tmp_path,
             log,
@@ -287,7 +296,7 @@ def test_goal_in_obstacle_or_outside_grid_is_skipped_with_reason(tmp_path):
         robot,
         NullCamera(),
         OracleLocalizer(robot),
-        GridPlanner(_open_grid()),
+        GridPlanner(_open_grid(), SIMPLIFY),
         FollowConfig(camera_forward_m=CAM_FWD),
         tmp_path,
     )
@@ -302,7 +311,7 @@ def test_go_to_view_puts_the_camera_centre_on_the_goal(tmp_path):
         robot,
         NullCamera(),
         OracleLocalizer(robot),
-        GridPlanner(_open_grid()),
+        GridPlanner(_open_grid(), SIMPLIFY),
         FollowConfig(camera_forward_m=CAM_FWD),
         tmp_path,
     )
@@ -337,7 +346,7 @@ def test_a_confident_wrong_fix_is_rejected_by_the_odometry_gate(tmp_path):
             robot,
             NullCamera(),
             loc,
-            GridPlanner(_open_grid()),
+            GridPlanner(_open_grid(), SIMPLIFY),
             FollowConfig(camera_forward_m=CAM_FWD),
             tmp_path,
             log,
@@ -354,7 +363,7 @@ def test_two_agreeing_fixes_override_a_wrong_initial_pose(tmp_path):
         robot,
         NullCamera(),
         OracleLocalizer(robot),
-        GridPlanner(_open_grid()),
+        GridPlanner(_open_grid(), SIMPLIFY),
         FollowConfig(camera_forward_m=CAM_FWD),
         tmp_path,
         initial_pose=Pose2D(1.5, 1.0, 0.0),  # 1.8 m off: the first fix is rejected
@@ -391,7 +400,7 @@ def test_mirrored_fixes_are_rejected_by_the_compass_even_when_they_agree(tmp_pat
             robot,
             NullCamera(),
             MirrorLocalizer(robot),
-            GridPlanner(_open_grid()),
+            GridPlanner(_open_grid(), SIMPLIFY),
             FollowConfig(camera_forward_m=CAM_FWD, compass_gate_deg=gate_deg),
             tmp_path,
             log,
@@ -435,7 +444,7 @@ def test_a_goal_is_reached_only_on_a_fix_a_second_view_confirms(tmp_path, confir
     robot = KinematicRobot((0.0, 0.0, 0.0), turn_slip=0.0, drive_short=0.25)
     loc = GlitchAtGoalLocalizer(robot, goal)
     cfg = FollowConfig(camera_forward_m=CAM_FWD, confirm_m=confirm_m)
-    f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid()), cfg, tmp_path)
+    f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid(), SIMPLIFY), cfg, tmp_path)
     res = f.follow(np.array([[0.0, 0.0], goal]))
     true_off = math.hypot(robot.true[0] - goal[0], robot.true[1] - goal[1])
     assert loc.glitched and res.reached and res.localized_at_goal
@@ -454,7 +463,7 @@ def test_after_giving_up_the_robot_leaves_a_blind_pocket_by_the_way_it_came(tmp_
     robot = KinematicRobot((0.0, 0.0, 0.0), boxes=pocket, turn_slip=0.0)
     loc = OracleLocalizer(robot, fail=lambda k: k > 0)  # the start is known, then nothing
     with CaptureLog(tmp_path / "log.jsonl") as log:
-        f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid()),
+        f = PathFollower(robot, NullCamera(), loc, GridPlanner(_open_grid(), SIMPLIFY),
                          FollowConfig(camera_forward_m=CAM_FWD, max_obstacles=3,
                                       retrace_clear_m=clear_m), tmp_path, log,
                          truth=lambda: {"truth_xy": robot.true[:2].tolist()})  # fmt: skip

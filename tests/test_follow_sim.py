@@ -16,8 +16,8 @@ import numpy as np
 import pycolmap
 import pytest
 
+from scenebot.capture.follow import FollowConfig, PathFollower
 from scenebot.config import SimConfig
-from scenebot.follow import FollowConfig, PathFollower
 from scenebot.localize import LocalizationMap, LocalizeConfig, localize
 from scenebot.localize.features import extract_sift, load_gray
 from scenebot.localize.index import MapDescriptors
@@ -74,11 +74,12 @@ def _planner(scene, cfg: SimConfig, skip_materials: tuple[str, ...] = ()):
         inflate_m=cfg.body.radius_m + 0.03,
         lethal_points=2.0,
     )
-    return GridPlanner(build_navgrid(pts, np.array([lo[:2], hi[:2]]), pcfg)), cam_z
+    grid = build_navgrid(pts, np.array([lo[:2], hi[:2]]), pcfg)
+    return GridPlanner(grid, pcfg.simplify_factor), cam_z
 
 
 class NoPhotoCamera(Camera):
-    def capture(self, dest, timeout_s=30.0):
+    def capture(self, dest, timeout_s=None):
         return dest
 
 
@@ -175,6 +176,7 @@ def test_follow_with_real_visual_localization(scene, tmp_path):
     intr = world.intrinsics
     planner, cam_z = _planner(scene, cfg)
     # Map: reference photos on circles at free spots, keypoints back-projected with true depth.
+    lcfg = LocalizeConfig()
     xyz, desc = [], []
     rng = np.random.default_rng(0)
     spots = []
@@ -188,7 +190,9 @@ def test_follow_with_real_visual_localization(scene, tmp_path):
             R = look_rotation(th)
             c = np.array([xy[0], xy[1], scene.floor_z + cfg.camera.height_m])
             img = world.renderer.render(intr, R, c, rng)
-            kps, d = extract_sift(load_gray(img))
+            # the map's SIFT: COLMAP's first octave (-1), as the sfm stage extracts it
+            kps, d = extract_sift(load_gray(img), -1, lcfg.sift_max_features,
+                                  lcfg.sift_num_threads)  # fmt: skip
             depth = world.renderer.depth(intr, R, c)
             ij = np.clip(kps.astype(int), 0, [intr.width - 1, intr.height - 1])
             z = depth[ij[:, 1], ij[:, 0]]
@@ -206,7 +210,6 @@ def test_follow_with_real_visual_localization(scene, tmp_path):
         height=intr.height,
         params=[intr.fx, intr.fy, intr.cx, intr.cy],
     )
-    lcfg = LocalizeConfig()
     lmap = LocalizationMap(md, cam, cfg=lcfg)
     errors = []
 

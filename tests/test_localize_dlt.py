@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from scenebot.localize.config import LocalizeConfig
 from scenebot.localize.dlt import (
     decompose_camera_matrix,
     dlt,
@@ -32,6 +33,18 @@ def _scene(rng, n=300, f=520.0, heading=0.4, centre=(1.0, 2.0, 0.0)):
     x, z = project(K @ np.c_[R, t], X)
     assert np.all(z > 0)
     return K, R, t, X, x
+
+
+def _ransac(**override) -> dict:
+    """ransac_dlt_pose's settings at their LocalizeConfig defaults, ``override`` replacing some."""
+    cfg = LocalizeConfig()
+    settings = {
+        "max_error_px": cfg.ransac_max_error_px,
+        "confidence": cfg.ransac_confidence,
+        "max_iterations": cfg.ransac_max_iterations,
+        "seed": cfg.seed,
+    }
+    return settings | override
 
 
 def _rot_err_deg(Ra, Rb):
@@ -90,7 +103,9 @@ def test_ransac_with_outliers(refine_focal):
     x = x + rng.normal(0, 0.7, x.shape)
     out = rng.random(400) < 0.45
     x[out] = rng.uniform([0, 0], [640, 480], (out.sum(), 2))
-    pose = ransac_dlt_pose(x, X, 320.0, 240.0, f_init=520.0, refine_focal=refine_focal, seed=1)
+    pose = ransac_dlt_pose(
+        x, X, 320.0, 240.0, f_init=520.0, refine_focal=refine_focal, **_ransac(seed=1)
+    )
     assert pose is not None
     C = -R.T @ t
     assert np.linalg.norm(-pose.R.T @ pose.t - C) < 0.01  # 1 cm at 1.5-6 m depth
@@ -106,10 +121,12 @@ def test_ransac_with_outliers(refine_focal):
 def test_ransac_too_few_matches_and_pure_noise():
     rng = np.random.default_rng(7)
     X = rng.normal(size=(5, 3)) + np.array([0.0, 0.0, 5.0])
-    assert ransac_dlt_pose(rng.uniform(0, 600, (5, 2)), X, 320, 240) is None
+    assert ransac_dlt_pose(rng.uniform(0, 600, (5, 2)), X, 320, 240, **_ransac()) is None
     X = rng.normal(size=(200, 3)) * np.array([2.0, 2.0, 1.0]) + np.array([0.0, 0.0, 5.0])
     x = rng.uniform(0, 640, (200, 2))
-    pose = ransac_dlt_pose(x, X, 320, 240, f_init=520.0, max_error_px=1.0, max_iterations=300)
+    pose = ransac_dlt_pose(
+        x, X, 320, 240, f_init=520.0, **_ransac(max_error_px=1.0, max_iterations=300)
+    )
     assert pose is None or pose.inliers.sum() < 20  # nothing consistent in random data
 
 
@@ -127,13 +144,13 @@ def test_matches_on_one_plane_fall_back_to_the_plane_homography():
     X, x = X[keep], x[keep] + rng.normal(0, 0.5, (keep.sum(), 2))
     out = rng.random(len(x)) < 0.3
     x[out] = rng.uniform([0, 0], [640, 480], (out.sum(), 2))
-    pose = ransac_dlt_pose(x, X, 320.0, 240.0, f_init=520.0)
+    pose = ransac_dlt_pose(x, X, 320.0, 240.0, f_init=520.0, **_ransac())
     assert pose is not None and pose.planar
     assert np.linalg.norm(-pose.R.T @ pose.t - C) < 0.01
     assert _rot_err_deg(pose.R, R) < 0.2
     assert pose.inliers[~out].mean() > 0.95
     # without a known focal length a planar scene has no DLT solution
-    assert ransac_dlt_pose(x, X, 320.0, 240.0, f_init=None, max_iterations=200) is None
+    assert ransac_dlt_pose(x, X, 320.0, 240.0, f_init=None, **_ransac(max_iterations=200)) is None
 
 
 def test_predicted_position_error_matches_the_spread_of_noisy_refits():

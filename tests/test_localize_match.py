@@ -5,8 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from scenebot.localize.config import LocalizeConfig
 from scenebot.localize.index import DescriptorIndex, MapDescriptors
 from scenebot.localize.match import match_to_map, ratio_test_distinct_points
+
+LOC = LocalizeConfig()
 
 
 def _sift_like(rng, n):
@@ -44,7 +47,7 @@ def test_matching_recovers_true_points_one_to_one():
     true_pt = rng.choice(len(base), 500, replace=False)
     q = np.clip(base[true_pt] + rng.normal(0, 3.0, (500, 128)), 0, 255).astype(np.uint8)
     q = np.vstack([q, _sift_like(rng, 300)])  # 300 queries with no counterpart
-    m = match_to_map(q, index, desc, knn=6, ratio=0.8)
+    m = match_to_map(q, index, desc, knn=LOC.knn, ratio=LOC.ratio)
     assert len(np.unique(m.point_ids)) == len(m)  # one-to-one
     real = m.query_idx < 500
     correct = m.point_ids[real] == true_pt[m.query_idx[real]] * 7 + 3

@@ -3,7 +3,9 @@ distance as the map saw them (score.matchable)."""
 
 import numpy as np
 
-from scenebot.score.geometry import Intrinsics, candidate_views
+from scenebot.geometry import Intrinsics
+from scenebot.score.config import ScoreConfig
+from scenebot.score.geometry import candidate_views
 from scenebot.score.matchable import matchable_points
 
 K = Intrinsics.from_hfov(80, 60, 60.0)
@@ -19,6 +21,10 @@ def wall(n=400, x=3.0, seed=0):
 
 
 def count(poses, xyz, vdir, vdist, **kw):
+    """Matchable points per pose, with the score settings not given in ``kw``."""
+    cfg = ScoreConfig()
+    kw = {"max_angle_deg": cfg.match_angle_deg, "max_scale_ratio": cfg.match_scale_ratio,
+          "near_m": cfg.near_m, **kw}  # fmt: skip
     return matchable_points(candidate_views(np.array(poses), K), K.width, K.height, xyz, vdir,
                             vdist, **kw)  # fmt: skip
 

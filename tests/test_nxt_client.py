@@ -9,6 +9,7 @@ import pytest
 from scenebot.robot.base import BatteryLowError, LinkLostError
 from scenebot.robot.nxt import protocol as p
 from scenebot.robot.nxt.client import BrickNotAnsweringError, NxtClient
+from scenebot.robot.nxt.config import NxtConfig
 from tests.fixtures.nxt_wire import FakeBrick, FakeClock
 
 
@@ -31,10 +32,12 @@ def brick_answer(telegram: bytes, battery=8100, sleep_ms=600000, status=0):
 
 
 def make(respond=brick_answer, chunk=64, **kw):
+    """A client with ``nxt`` settings ``kw`` (reply timeout 0.5 s, 2 retries, no automatic
+    keepalive unless given)."""
     clock = FakeClock()
     brick = FakeBrick(clock, respond, chunk)
-    kw.setdefault("keepalive_interval_s", 1e9)
-    client = NxtClient(brick, clock=clock, reply_timeout_s=0.5, retries=2, **kw)
+    kw = {"reply_timeout_s": 0.5, "retries": 2, "keepalive_interval_s": 1e9, **kw}
+    client = NxtClient.from_config(brick, NxtConfig(**kw), clock=clock)
     client.last_keepalive = clock.t  # skip the automatic first keepalive unless tested
     return client, brick, clock
 
@@ -170,7 +173,7 @@ def test_battery_check():
 
 
 def test_handshake_clear_error_when_brick_silent():
-    client, _, _ = make(respond=lambda tg: [], port_name="/dev/rfcomm7")
+    client, _, _ = make(respond=lambda tg: [], port="/dev/rfcomm7")
     with pytest.raises(BrickNotAnsweringError, match=r"/dev/rfcomm7: is it switched on"):
         client.handshake()
 
@@ -181,15 +184,10 @@ def test_reconnect_runs_hooks_then_retries_idempotent():
     first.fail_read = OSError(5, "read failed: EIO")
     second = FakeBrick(clock, brick_answer)
     hooks = []
-    client = NxtClient(
-        first,
-        clock=clock,
-        reply_timeout_s=0.5,
-        keepalive_interval_s=1e9,
-        opener=lambda: second,
-        reconnect_attempts=3,
-        reconnect_delay_s=0.2,
+    cfg = NxtConfig(
+        reply_timeout_s=0.5, keepalive_interval_s=1e9, reconnect_attempts=3, reconnect_delay_s=0.2
     )
+    client = NxtClient.from_config(first, cfg, clock=clock, opener=lambda: second)
     client.last_keepalive = clock.t
     client.on_reconnect.append(lambda: hooks.append(client.keepalive()))
     assert client.output_state(1).rotation_count == 42
@@ -205,7 +203,9 @@ def test_reconnect_failure_is_link_lost():
     def opener():
         raise FileNotFoundError(2, "No such file")
 
-    client = NxtClient(first, clock=clock, opener=opener, reconnect_attempts=2)
+    client = NxtClient.from_config(
+        first, NxtConfig(reconnect_attempts=2), clock=clock, opener=opener
+    )
     client.last_keepalive = clock.t
     with pytest.raises(LinkLostError, match="motors keep running"):
         client.battery_mv()
@@ -240,7 +240,9 @@ def test_after_a_failed_reopen_requests_fail_fast():
         opened.append(1)
         raise FileNotFoundError(2, "No such file")
 
-    client = NxtClient(first, clock=clock, opener=opener, reconnect_attempts=2)
+    client = NxtClient.from_config(
+        first, NxtConfig(reconnect_attempts=2), clock=clock, opener=opener
+    )
     client.last_keepalive = clock.t
     with pytest.raises(LinkLostError):
         client.battery_mv()

@@ -9,6 +9,7 @@ import pytest
 from scenebot.robot.base import Pose2D
 from scenebot.robot.nxt import protocol as p
 from scenebot.robot.nxt.client import NxtClient
+from scenebot.robot.nxt.config import NxtConfig
 from scenebot.robot.nxt.sensors import (
     HiTechnicCompass,
     Odometry,
@@ -20,6 +21,8 @@ from scenebot.robot.nxt.sensors import (
     compass_to_ccw,
 )
 from tests.fixtures.nxt_wire import FakeBrick, FakeClock
+
+NXT = NxtConfig()
 
 
 class I2CBrick:
@@ -75,7 +78,9 @@ class I2CBrick:
 
 def client_for(brick):
     clock = FakeClock()
-    c = NxtClient(FakeBrick(clock, brick), clock=clock, keepalive_interval_s=1e9)
+    c = NxtClient.from_config(
+        FakeBrick(clock, brick), NxtConfig(keepalive_interval_s=1e9), clock=clock
+    )
     c.last_keepalive = clock.t
     return c, clock
 
@@ -102,7 +107,7 @@ def test_ultrasonic_no_echo_is_255():
 @pytest.mark.parametrize(("h", "ccw"), [(0, 0.0), (90, 270.0), (359, 1.0), (181, 179.0)])
 def test_compass_registers_and_clockwise_conversion(h, ccw):
     c, clock = client_for(I2CBrick({0x42: h // 2, 0x43: h % 2}, sensor_type=0x0A))
-    cw = HiTechnicCompass(c, 2, clock, "clockwise")
+    cw = HiTechnicCompass(c, 2, clock, "clockwise", offset_deg=0.0)
     assert cw.raw_heading_deg() == h
     assert cw.heading_ccw_deg() == pytest.approx(ccw)
     same = HiTechnicCompass(c, 2, clock, "counter_clockwise", offset_deg=10.0)
@@ -112,13 +117,15 @@ def test_compass_registers_and_clockwise_conversion(h, ccw):
 def test_compass_impossible_registers():
     c, clock = client_for(I2CBrick({0x42: 200, 0x43: 0}, sensor_type=0x0A))
     with pytest.raises(SensorReadError, match="HiTechnic"):
-        HiTechnicCompass(c, 2, clock).raw_heading_deg()
+        HiTechnicCompass(
+            c, 2, clock, NXT.compass_convention, NXT.compass_offset_deg
+        ).raw_heading_deg()
 
 
 def test_compass_to_ccw_bad_convention():
-    assert compass_to_ccw(10.0, "clockwise") == 350.0
+    assert compass_to_ccw(10.0, "clockwise", 0.0) == 350.0
     with pytest.raises(ValueError, match="convention"):
-        compass_to_ccw(10.0, "north")
+        compass_to_ccw(10.0, "north", 0.0)
 
 
 def test_bus_error_retries_whole_transaction():
@@ -237,7 +244,7 @@ def test_lost_reply_redoes_the_whole_register_read(lose, writes):
 def test_lost_reply_redoes_a_register_write():
     brick = I2CBrick({}, sensor_type=0x0A, lose={p.LsWrite: 1})
     c, clock = client_for(brick)
-    HiTechnicCompass(c, 2, clock).setup()
+    HiTechnicCompass(c, 2, clock, NXT.compass_convention, NXT.compass_offset_deg).setup()
     assert brick.regs[0x41] == 0x00
     assert sum(isinstance(cmd, p.LsWrite) for cmd in brick.log) == 2
 

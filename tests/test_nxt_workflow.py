@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from scenebot.capture.explore import PhotoTaker, random_exploration
 from scenebot.capturelog import CaptureLog, read_log
 from scenebot.config import validate_config
-from scenebot.explore import PhotoTaker, random_exploration
 from scenebot.robot.factory import make_emulator_world
 from scenebot.robot.nxt import EmulatorConfig, NxtConfig
 from scenebot.robot.nxt.backend import make_nxt_backend

@@ -18,6 +18,8 @@ from scenebot.plan.navgrid import GridGeometry, NavGrid, grid_from_counts
 from scenebot.plan.path import GridPlanner
 from scenebot.plan.simplify import merge_runs, polyline_cost, simplify_path
 
+SIMPLIFY = PlanConfig().simplify_factor
+
 
 def _dijkstra_cost(cost: np.ndarray, s, t, cell=1.0) -> float:
     """Reference: scipy Dijkstra on the explicit 8-neighbour graph (entering-cell costs)."""
@@ -126,13 +128,13 @@ def _room_grid(n=60):
 def test_plan_path_routes_through_the_door_and_keeps_exact_endpoints():
     g = _room_grid()
     start, goal = np.array([1.0, 1.2]), np.array([1.0, 4.8])
-    res = plan_path(g, start, goal)
+    res = plan_path(g, start, goal, SIMPLIFY)
     assert isinstance(res, PlannedPath)
     np.testing.assert_array_equal(res.waypoints_xy[0], start)
     np.testing.assert_array_equal(res.waypoints_xy[-1], goal)
     assert res.waypoints_xy[:, 0].max() > 0.8 * 6.0  # went around through the door
     assert len(res.waypoints_xy) < 10
-    assert res.cost <= 1.1 * res.astar_cost * (1 + 1e-9)
+    assert res.cost <= SIMPLIFY * res.astar_cost * (1 + 1e-9)
     # the straight segments stay out of lethal cells
     for a, b in zip(res.waypoints_xy[:-1], res.waypoints_xy[1:], strict=True):
         for u in np.linspace(0, 1, 200):
@@ -142,20 +144,20 @@ def test_plan_path_routes_through_the_door_and_keeps_exact_endpoints():
 
 def test_plan_path_failures_have_reasons():
     g = _room_grid()
-    out = plan_path(g, np.array([1.0, 1.0]), np.array([9.0, 1.0]))
+    out = plan_path(g, np.array([1.0, 1.0]), np.array([9.0, 1.0]), SIMPLIFY)
     assert isinstance(out, PlanFailure) and out.reason is PlanFailureReason.GOAL_OUTSIDE_GRID
-    out = plan_path(g, np.array([1.0, 1.0]), np.array([1.0, 3.0]))  # on the wall
+    out = plan_path(g, np.array([1.0, 1.0]), np.array([1.0, 3.0]), SIMPLIFY)  # on the wall
     assert isinstance(out, PlanFailure) and out.reason is PlanFailureReason.GOAL_IN_OBSTACLE
     closed = NavGrid(g.geometry, g.counts, g.kde, g.score, g.lethal.copy(), g.cost_per_m)
     closed.lethal[27:34, :] = True  # close the door
-    out = plan_path(closed, np.array([1.0, 1.0]), np.array([1.0, 4.8]))
+    out = plan_path(closed, np.array([1.0, 1.0]), np.array([1.0, 4.8]), SIMPLIFY)
     assert isinstance(out, PlanFailure) and out.reason is PlanFailureReason.NO_ROUTE
     assert "crosses an obstacle" in out.message
 
 
 def test_grid_planner_learns_a_bumped_obstacle():
     g = _room_grid()
-    planner = GridPlanner(g)
+    planner = GridPlanner(g, SIMPLIFY)
     before = planner(np.array([1.0, 1.0]), np.array([5.0, 1.0]))
     assert isinstance(before, PlannedPath)
     assert planner.mark_obstacle(np.array([3.0, 1.0]), 0.4) > 0

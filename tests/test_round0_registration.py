@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from scenebot.capture import run_capture
+from scenebot.capture.stage import run_capture
 from scenebot.capturelog import photo_records
 from scenebot.config import validate_config
 

@@ -65,7 +65,7 @@ def test_both_rooms_and_the_corridor_are_one_reachable_region(seed):
 
 def test_a_capture_of_20_photos_runs_in_the_flat(tmp_path, monkeypatch, scene):
     import scenebot.scene.loader as loader
-    from scenebot.capture import run_capture
+    from scenebot.capture.stage import run_capture
     from scenebot.capturelog import photo_records
 
     # until config.py lists "flat" in world.builtin, hand the scene to the capture directly

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from scenebot.score.freespace import FreeSpace
-from scenebot.score.frontier import frontier_cells, frontier_goals, seen_cells
+from scenebot.artifacts.freespace import FreeSpace
+from scenebot.goals.frontier import frontier_cells, frontier_goals, seen_cells
 
 
 def room(nx=80, ny=40, res=0.05):

@@ -79,7 +79,7 @@ def test_uncovered_half_scores_worse():
     # all photos taken in the west half, looking west: the east half is never photographed
     th = np.deg2rad(np.arange(120, 241, 15))
     poses = np.array([(x, y, a) for x in (-2.0, -1.0) for y in (-1.0, 0.0, 1.0) for a in th])
-    from scenebot.score.geometry import planar_cam_from_world
+    from scenebot.geometry import planar_cam_from_world
 
     Rt = planar_cam_from_world(poses[:, 0], poses[:, 1], poses[:, 2])
     R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]
@@ -100,7 +100,7 @@ def test_occluded_sources_do_not_count():
     # a closed wall at x = 0 splits the room; the only source stands east of it looking west,
     # right behind the candidate's rays: without occlusion the angles would be small
     Rt_src = np.array([[1.5, 0.0, np.pi]])
-    from scenebot.score.geometry import planar_cam_from_world
+    from scenebot.geometry import planar_cam_from_world
 
     Rt = planar_cam_from_world(Rt_src[:, 0], Rt_src[:, 1], Rt_src[:, 2])
     R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]

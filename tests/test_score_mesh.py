@@ -9,17 +9,14 @@ import pytest
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
+from scenebot.artifacts.freespace import FreeSpace, FreeSpaceError, point_segment_distance
+from scenebot.artifacts.mesh import MeshError, check_mesh, read_mesh
+from scenebot.mesh.config import MeshConfig
+from scenebot.mesh.freespace import compute_freespace, cut_segments
+from scenebot.mesh.poisson import build_mesh
+from scenebot.mesh.stage import MeshInputs, MeshOutputs
+from scenebot.mesh.stage import run as run_mesh
 from scenebot.score.candidates import sample_candidates
-from scenebot.score.config import MeshConfig
-from scenebot.score.freespace import (
-    FreeSpace,
-    FreeSpaceError,
-    compute_freespace,
-    cut_segments,
-    point_segment_distance,
-)
-from scenebot.score.mesh import MeshError, build_mesh, check_mesh, read_mesh
-from scenebot.score.stage import MeshInputs, MeshOutputs, run_mesh
 from scenebot.testing import score as syn
 
 ROOM = (6.0, 4.0)
@@ -139,7 +136,7 @@ def test_empty_freespace_and_zero_candidates_are_named():
 def test_points_hundreds_of_metres_out_are_left_out_of_the_mesh(tmp_path, caplog):
     """A few triangulations of nearly parallel rays land hundreds of metres away; they must
     not stretch the mesh or the free-space raster (that raster would not fit in memory)."""
-    from scenebot.score.freespace import FreeSpaceError
+    from scenebot.artifacts.freespace import FreeSpaceError
 
     V, F = syn.room(size=ROOM, cell_m=0.5)
     R, t, _ = syn.ring_sources(RINGS, 12)

@@ -16,9 +16,31 @@ from scenebot.sfm.align import (
     fit_scale_to_circles,
     turn_in_place_circles,
 )
+from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.evaluate import evaluate_accuracy, robust_similarity, umeyama
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.photos import Photo
+
+
+def _frame_settings(**override) -> dict:
+    """fit_robot_frame's settings at their SfmConfig defaults, ``override`` replacing some."""
+    cfg = SfmConfig()
+    settings = {
+        "camera_yaw_deg": cfg.camera_yaw_deg,
+        "use_compass": cfg.use_compass,
+        "min_odometry_pairs": cfg.min_odometry_pairs,
+        "camera_offset_m": cfg.camera_offset_m,
+        "min_circle_photos": cfg.min_circle_photos,
+        "max_circle_residual": cfg.max_circle_residual,
+    }
+    return settings | override
+
+
+def _circle_settings(**override) -> dict:
+    """fit_scale_to_circles' settings at their SfmConfig defaults, ``override`` replacing some."""
+    cfg = SfmConfig()
+    settings = {"min_photos": cfg.min_circle_photos, "max_rel_residual": cfg.max_circle_residual}
+    return settings | override
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -85,7 +107,7 @@ def test_fit_robot_frame_recovers_scale_heading_and_plane(seed):
     s0, R0, t0 = rng.uniform(0.2, 5.0), _random_rotation(rng), rng.normal(size=3)
     Cs = (C - t0) @ R0 / s0
     Cs += rng.normal(0, 0.002 / s0, Cs.shape)  # 2 mm SfM noise
-    al = fit_robot_frame(photos, Cs, U @ R0, V @ R0)
+    al = fit_robot_frame(photos, Cs, U @ R0, V @ R0, **_frame_settings())
     assert al.scale_source == "odometry" and al.heading_source == "compass"
     assert al.scale == pytest.approx(s0, rel=0.02)
     Cr = al.scale * Cs @ al.R.T + al.t
@@ -121,14 +143,15 @@ def test_lever_arm_scale_is_immune_to_drive_slip(seed):
     photos, C, U, V = _robot_trajectory(rng, per_circle=18, offset=offset, drive_slip=0.06)
     s0, Cs, Us, Vs = _sfm_frame(rng, C, U, V)
     radius = math.hypot(*offset)
-    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=radius)
+    al = fit_robot_frame(photos, Cs, Us, Vs, **_frame_settings(camera_offset_m=radius))
     assert al.scale_source == "camera_lever_arm"
     assert al.scale == pytest.approx(s0, rel=0.01)
     assert np.allclose(al.camera_offset_m, offset, atol=0.003)
     assert al.stats["circles_used"] == 4
     assert al.stats["scale_odometry"] == pytest.approx(s0 / 0.94, rel=0.02)
     assert al.stats["scale_odometry_vs_circles"] == pytest.approx(1 / 0.94 - 1, abs=0.02)
-    plain = fit_robot_frame(photos, Cs, Us, Vs)  # without the lever arm: biased by the slip
+    # without the lever arm: biased by the slip
+    plain = fit_robot_frame(photos, Cs, Us, Vs, **_frame_settings())
     assert plain.scale_source == "odometry"
     assert abs(plain.scale / s0 - 1) > 0.04
     Cr = al.scale * Cs @ al.R.T + al.t
@@ -139,7 +162,9 @@ def test_lever_arm_scale_falls_back_to_odometry_without_usable_circles():
     rng = np.random.default_rng(5)
     photos, C, U, V = _robot_trajectory(rng, per_circle=6)  # 6 photos per circle < 8
     s0, Cs, Us, Vs = _sfm_frame(rng, C, U, V)
-    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=0.102, min_circle_photos=8)
+    al = fit_robot_frame(
+        photos, Cs, Us, Vs, **_frame_settings(camera_offset_m=0.102, min_circle_photos=8)
+    )
     assert al.scale_source == "odometry"
     assert al.stats["scale_circles"] is None
     assert all(not c["used"] and "fewer than 8" in c["rejected"] for c in al.stats["circles"])
@@ -153,14 +178,14 @@ def test_circles_lost_in_the_map_noise_give_no_scale():
     rng = np.random.default_rng(11)
     photos, C, U, V = _robot_trajectory(rng, per_circle=18, offset=(0.1, 0.0))
     s0, Cs, Us, Vs = _sfm_frame(rng, C, U, V, noise_m=0.07)
-    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=0.1)
+    al = fit_robot_frame(photos, Cs, Us, Vs, **_frame_settings(camera_offset_m=0.1))
     assert al.scale_source == "odometry"
     assert al.stats["scale_circles"] is None
     assert all("off the fitted circle" in c["rejected"] for c in al.stats["circles"])
     assert al.scale == pytest.approx(s0, rel=0.05)
     # the same trajectory at 2 mm of noise: every circle counts
     s1, Cs, Us, Vs = _sfm_frame(rng, C, U, V, noise_m=0.002)
-    al = fit_robot_frame(photos, Cs, Us, Vs, camera_offset_m=0.1)
+    al = fit_robot_frame(photos, Cs, Us, Vs, **_frame_settings(camera_offset_m=0.1))
     assert al.scale_source == "camera_lever_arm"
     assert all(c["used"] for c in al.stats["circles"])
     assert al.scale == pytest.approx(s1, rel=0.01)
@@ -177,13 +202,15 @@ def test_turn_in_place_circles_and_outlier_circle_rejection():
     bad = np.array(circles[2])
     axis = xy[bad].mean(0)
     xy[bad] = axis + 1.3 * (xy[bad] - axis)  # one circle 30 % too large (a broken part)
-    scale, u, stats = fit_scale_to_circles(xy, h, circles, 0.1)
+    scale, u, stats = fit_scale_to_circles(xy, h, circles, 0.1, **_circle_settings())
     assert scale == pytest.approx(0.5, rel=1e-6)
     assert np.allclose(u, (0.2, 0.0), atol=1e-9)
     assert [c["used"] for c in stats["circles"]] == [True, True, False, True, True]
     assert "disagrees" in stats["circles"][2]["rejected"]
     # a short arc (3 photos over 60 deg) cannot separate the axis from the lever arm
-    _, _, stats2 = fit_scale_to_circles(xy, h, [circles[0][:3]], 0.1, min_photos=3)
+    _, _, stats2 = fit_scale_to_circles(
+        xy, h, [circles[0][:3]], 0.1, **_circle_settings(min_photos=3)
+    )
     assert "span" in stats2["circles"][0]["rejected"]
 
 
@@ -391,11 +418,12 @@ def test_photos_registered_off_their_compass_heading_are_left_out():
         deg = math.degrees(math.atan2(fwd[1], fwd[0])) + {2: 5.0, 5: -25.0}.get(k, 0.0)
         photos.append(Photo(name=im.name, path=None, compass_deg=None if k == 0 else deg % 360))
     n = rec.num_reg_images()
-    out = drop_off_compass(rec, photos, 12.0)
+    yaw = SfmConfig().camera_yaw_deg
+    out = drop_off_compass(rec, photos, 12.0, camera_yaw_deg=yaw)
     assert list(out) == [photos[5].name] and out[photos[5].name] == pytest.approx(25.0)
     assert rec.num_reg_images() == n - 1
     assert all(p.track.length() >= 2 for p in rec.points3D.values())
-    assert drop_off_compass(rec, photos, 0.0) == {}  # off
+    assert drop_off_compass(rec, photos, 0.0, camera_yaw_deg=yaw) == {}  # off
     # a camera mounted looking 90 deg left of the robot's forward axis
     for p in photos:
         if p.compass_deg is not None:

@@ -227,6 +227,13 @@ def test_photos_off_their_circle_are_moved_back(round0):
         root,
         base / "repair_work",
         triangulation_options=mapping_options(cfg, [p.name for p in photos], fix_focal=True),
+        max_residual_m=cfg.circle_max_residual_m,
+        prior_std_m=cfg.circle_prior_std_m,
+        iterations=cfg.circle_prior_iterations,
+        min_photos=cfg.min_circle_photos,
+        camera_yaw_deg=cfg.camera_yaw_deg,
+        max_error_px=cfg.refine_max_error_px,
+        refine_extra_params=cfg.refine_distortion,
         num_threads=1,
     )
     assert sorted(stats["moved"]) == sorted(moved)

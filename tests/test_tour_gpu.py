@@ -19,12 +19,12 @@ import json, os, sys
 os.environ["TI_SKIP_VERSION_CHECK"] = "ON"
 import numpy as np, pycolmap
 from pathlib import Path
-from scenebot.tour._ti import init_taichi
+from scenebot.taichi_setup import init_taichi
 from scenebot.tour.config import TourConfig
 from scenebot.tour.proxy import load_proxy
 from scenebot.tour.ulr import UlrRenderer, load_sources
 root, arch, out = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
-name = init_taichi(arch)
+name = init_taichi(arch, -1)
 if arch == "gpu" and name in ("x64", "arm64"):
     print(json.dumps({"arch": name})); sys.exit(0)
 cfg = TourConfig()

@@ -28,7 +28,9 @@ def test_waypoints_cluster_consecutive_photos():
 def test_path_is_smooth_clear_and_passes_the_stops(room_points):
     centers, _ = rig(per_stop=10)
     cfg = PathConfig(frames=120)
-    checker = ClearanceChecker(room_points, cfg.clearance_m, 0.0, cfg.height_band_m)
+    checker = ClearanceChecker(
+        room_points, cfg.clearance_m, 0.0, cfg.height_band_m, min_points=cfg.obstacle_min_points
+    )
     path = plan_tour(centers, cfg, checker)
     assert len(path) == 120 and path.dropped == 0
     assert path.kind == "spline"
@@ -58,7 +60,10 @@ def test_single_stop_turns_in_place():
 
 def test_no_valid_pose_is_a_clear_error(room_points):
     centers, _ = rig(per_stop=4)
-    checker = ClearanceChecker(room_points, 5.0, 0.0, 0.3)  # nothing is 5 m from a wall
+    # nothing is 5 m from a wall
+    checker = ClearanceChecker(
+        room_points, 5.0, 0.0, 0.3, min_points=PathConfig().obstacle_min_points
+    )
     with pytest.raises(TourInputError, match=r"tour\.path\.clearance_m"):
         plan_tour(centers, PathConfig(frames=20), checker)
     with pytest.raises(TourInputError, match="no registered photo"):
@@ -70,6 +75,7 @@ def test_path_through_an_obstacle_falls_back_or_drops(room_points):
     centers = np.array([[0, 0, 0], [1, 1, 0], [2, 0, 0], [3, 1, 0.0]])
     pillar = np.random.default_rng(0).normal([1.5, 0.9, 0], [0.02, 0.02, 0.1], (200, 3))
     cfg = PathConfig(frames=80, clearance_m=0.1)
-    path = plan_tour(centers, cfg, ClearanceChecker(pillar, 0.1, 0.0, 0.3))
+    checker = ClearanceChecker(pillar, 0.1, 0.0, 0.3, min_points=cfg.obstacle_min_points)
+    path = plan_tour(centers, cfg, checker)
     d = np.min(np.linalg.norm(path.positions[:, None, :2] - pillar[None, :, :2], axis=2), axis=1)
     assert d.min() >= 0.1

@@ -9,8 +9,8 @@ os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 import numpy as np
 import pytest
 
+from scenebot.taichi_setup import init_taichi
 from scenebot.testing import dense as syn
-from scenebot.tour._ti import init_taichi
 from scenebot.tour.camera import Camera, TourInputError, look_rotation
 from scenebot.tour.config import ProxyConfig
 from scenebot.tour.proxy import (
@@ -33,7 +33,7 @@ def scene_cloud():
 
 
 def test_splat_depth_matches_true_depth(scene_cloud):
-    init_taichi("cpu")
+    init_taichi("cpu", -1)
     scene, pts, nrm = scene_cloud
     # this cloud is far sparser on screen than an MVS cloud at photo resolution (the default
     # splat cap suits those), so splats may grow to their full neighbour-distance size here

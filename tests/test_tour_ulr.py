@@ -10,8 +10,8 @@ import numpy as np
 import pycolmap
 import pytest
 
+from scenebot.taichi_setup import init_taichi
 from scenebot.testing import dense as syn
-from scenebot.tour._ti import init_taichi
 from scenebot.tour.camera import Camera
 from scenebot.tour.config import TourConfig
 from scenebot.tour.evaluate import leave_one_out, psnr, ssim
@@ -27,7 +27,7 @@ def dataset(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def renderer(dataset):
-    init_taichi("cpu")
+    init_taichi("cpu", -1)
     cfg = TourConfig()
     proxy = load_proxy(dataset.dense_ply, cfg.proxy)
     rec = pycolmap.Reconstruction(str(dataset.sparse_dir))

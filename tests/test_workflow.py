@@ -150,7 +150,7 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
     # the photos are given: mark the capture up to date instead of taking new ones
     trajectory = capture / "trajectory.png"
     if not trajectory.exists():
-        from scenebot.capture import plot_trajectory
+        from scenebot.capture.stage import plot_trajectory
 
         plot_trajectory(capture / "log.jsonl", trajectory)
     touched = snakemake(workdir, "--touch", *CAPTURE)

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from scenebot.settings import Settings
 
 
-class PatchMatchConfig(BaseModel):
+class PatchMatchConfig(Settings):
     """Settings of the taichi PatchMatch stereo (and of pycolmap's CUDA one where used)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     iterations: list[int] = Field(
         [1, 1, 3, 3],
@@ -71,10 +71,8 @@ class PatchMatchConfig(BaseModel):
     seed: int = Field(0, description="Random seed of the hypothesis initialisation.")
 
 
-class PlaneFillConfig(BaseModel):
+class PlaneFillConfig(Settings):
     """Plane completion of the depth maps before fusion (:mod:`scenebot.dense.planefill`)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     enabled: bool = Field(
         True,
@@ -202,14 +200,14 @@ class PlaneFillConfig(BaseModel):
         description="Empty again the filled pixels that the view's own SfM points contradict "
         "(a close object stereo missed, its features in front of the filled wall): the "
         "Delaunay triangles of the view's observations whose three corners lie off the fill "
-        "by > 5% (planefill.sparse_contradicted_fill).",
+        "by > 5% (planes.vetoes.sparse_contradicted_fill).",
     )
     floor_to_walls: bool = Field(
         True,
         description="The floor's extent reaches the bottom edges of the room's walls (boundary "
         "planes), gaps up to 0.6 m closed: a corner of the floor is seen only at grazing "
         "angles from across the room, and the floor's carved hull cut it off "
-        "(planefill.span_walls).",
+        "(planes.extents.span_walls).",
     )
     walls_to_ceiling_m: float = Field(
         1.2,
@@ -217,7 +215,7 @@ class PlaneFillConfig(BaseModel):
         description="With a ceiling found: the room's walls (boundary planes) rise to it from "
         "their highest measured cells when it is less than this (m) above them (a level "
         "camera measures the top of a wall only from across the room; "
-        "planefill.span_to_ceiling); 0: off.",
+        "planes.extents.span_to_ceiling); 0: off.",
     )
     sparse_veto_max_edge_px: float = Field(
         120.0,
@@ -281,10 +279,8 @@ class PlaneFillConfig(BaseModel):
     seed: int = Field(0, description="Seed of the point sampling and RANSAC.")
 
 
-class DenseConfig(BaseModel):
+class DenseConfig(Settings):
     """Settings of the dense stage: undistortion, view selection, depth estimation, fusion."""
-
-    model_config = ConfigDict(extra="forbid")
 
     max_image_size: int = Field(
         640, ge=32, description="Longest side of the undistorted images, pixels (-1 not allowed)."

@@ -33,50 +33,13 @@ os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 import taichi as ti
 
 from scenebot.dense.config import PatchMatchConfig
+from scenebot.taichi_setup import init_taichi, taichi_arch
 
 LOG = logging.getLogger(__name__)
 
 MAX_TOPK = 8
 BAD_COST = 2.0  # invalid plane (seen edge-on or from behind): never preferred
 OUT_COST = 1.0  # source that does not see the pixel: uninformative, like NCC = 0
-
-_TI_ARCH: str | None = None
-
-
-def init_taichi(arch: str = "auto", num_threads: int = -1, seed: int = 0) -> str:
-    """Initialise taichi once for this process.
-
-    Args:
-        arch: ``auto`` (CUDA, then Vulkan, then CPU), ``gpu`` (CUDA or Vulkan, else CPU with a
-            warning) or ``cpu``.
-        num_threads: CPU threads (-1 = all cores).
-        seed: seed of taichi's random generator (fixed for the whole process).
-
-    Returns:
-        The name of the arch taichi runs on (``cpu``, ``cuda``, ``vulkan``, ...).
-    """
-    global _TI_ARCH
-    if _TI_ARCH is not None:
-        return _TI_ARCH
-    kwargs: dict = {
-        "default_fp": ti.f32,
-        "offline_cache": True,
-        "log_level": ti.WARN,
-        "random_seed": seed,
-    }
-    if num_threads > 0:
-        kwargs["cpu_max_num_threads"] = num_threads
-    archs = [ti.cpu] if arch == "cpu" else [ti.cuda, ti.vulkan, ti.cpu]
-    ti.init(arch=archs, **kwargs)
-    _TI_ARCH = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
-    if arch == "gpu" and _TI_ARCH in ("x64", "arm64", "cpu"):
-        LOG.warning("taichi_arch=gpu requested but no CUDA/Vulkan device: running on CPU")
-    return _TI_ARCH
-
-
-def taichi_arch() -> str | None:
-    """The arch taichi was initialised with, or None before :func:`init_taichi`."""
-    return _TI_ARCH
 
 
 @dataclass
@@ -182,6 +145,142 @@ def _fb_error(s, x, d, A, b, Q, q, sdepth: ti.template(), src_hw: ti.template())
 
 
 @ti.func
+def _ncc_cost(
+    i,
+    j,
+    s,
+    Hm,
+    uc,
+    vc,
+    iz,
+    wn: ti.template(),
+    rn: ti.template(),
+    src: ti.template(),
+    ws,
+    hs,
+    R: ti.template(),
+    STEP: ti.template(),
+):
+    """1 - NCC of reference pixel (i, j)'s window against source ``s``, the window warped
+    by the homography ``Hm`` expanded to first order at the pixel centre, which it maps to
+    (uc, vc) (``iz``: 1 / its homogeneous z); 1 for a textureless source window."""
+    NW = ti.static(2 * R // STEP + 1)
+    # Jacobian of (u, v) w.r.t. the reference pixel offset (dx, dy)
+    jux = (Hm[0, 0] - uc * Hm[2, 0]) * iz
+    jvx = (Hm[1, 0] - vc * Hm[2, 0]) * iz
+    juy = (Hm[0, 1] - uc * Hm[2, 1]) * iz
+    jvy = (Hm[1, 1] - vc * Hm[2, 1]) * iz
+    u0 = uc - 0.5
+    v0 = vc - 0.5
+    s1 = 0.0
+    s2 = 0.0
+    sx = 0.0
+    for ky in ti.static(range(NW)):
+        dy = ti.static(ky * STEP - R)
+        for kx in ti.static(range(NW)):
+            dx = ti.static(kx * STEP - R)
+            val = _bilinear(src, s, u0 + dx * jux + dy * juy, v0 + dx * jvx + dy * jvy, ws, hs)
+            wk = wn[i, j, ky * NW + kx]
+            s1 += wk * val
+            s2 += wk * val * val
+            sx += rn[i, j, ky * NW + kx] * val
+    var = s2 - s1 * s1
+    cp = 1.0
+    if var > 1e-8:
+        cp = 1.0 - ti.min(ti.max(sx / ti.sqrt(var), -1.0), 1.0)
+    return cp
+
+
+@ti.func
+def _source_cost(
+    i,
+    j,
+    s,
+    x,
+    d,
+    m,
+    wn: ti.template(),
+    rn: ti.template(),
+    src: ti.template(),
+    src_hw: ti.template(),
+    A_all: ti.template(),
+    b_all: ti.template(),
+    Q_all: ti.template(),
+    q_all: ti.template(),
+    sdepth: ti.template(),
+    use_geom,
+    geom_w,
+    geom_max,
+    R: ti.template(),
+    STEP: ti.template(),
+):
+    """Cost of the plane at reference pixel x = (j + 0.5, i + 0.5, 1) (depth ``d``,
+    ``m = K_r^-T n / rho``) in source ``s``: (1 - NCC [+ geometric term], 1 - NCC); (larger
+    than any valid cost, OUT_COST) where the source does not see the pixel."""
+    A = _mat3(A_all, s)
+    b = _vec3(b_all, s)
+    Hm = A + b.outer_product(m)
+    base = Hm @ x
+    c = 2.0 * OUT_COST  # larger than any valid cost: an invalid source is never inserted
+    cp = OUT_COST
+    ws = ti.cast(src_hw[s, 1], ti.f32)
+    hs = ti.cast(src_hw[s, 0], ti.f32)
+    if base.z > 1e-6:
+        iz = 1.0 / base.z
+        uc = base.x * iz
+        vc = base.y * iz
+        if uc >= 0.0 and vc >= 0.0 and uc < ws and vc < hs:
+            cp = _ncc_cost(i, j, s, Hm, uc, vc, iz, wn, rn, src, ws, hs, R, STEP)
+            c = cp
+            if use_geom:
+                Q = _mat3(Q_all, s)
+                q = _vec3(q_all, s)
+                err, _rel = _fb_error(s, x, d, A, b, Q, q, sdepth, src_hw)
+                c += geom_w * ti.min(err, geom_max)
+    return c, cp
+
+
+@ti.func
+def _insert_top_k(best, best_p, best_i, c, cp, s, top_k):
+    """The sorted lists of the ``top_k`` smallest costs (``best``), their photometric parts
+    (``best_p``) and sources (``best_i``) with source ``s``'s cost (c, cp) inserted."""
+    si = s
+    for kk in ti.static(range(MAX_TOPK)):
+        if kk < top_k and c < best[kk]:
+            tmp = best[kk]
+            tmp_p = best_p[kk]
+            tmp_i = best_i[kk]
+            best[kk] = c
+            best_p[kk] = cp
+            best_i[kk] = si
+            c = tmp
+            cp = tmp_p
+            si = tmp_i
+    return best, best_p, best_i
+
+
+@ti.func
+def _top_k_mean(best, best_p, best_i, top_k):
+    """(total, photometric, selected) of :func:`_cost` from its sorted top_k lists."""
+    acc = 0.0
+    acc_p = 0.0
+    n_valid = 0
+    selected = 0
+    for kk in ti.static(range(MAX_TOPK)):
+        if kk < top_k:
+            acc += best[kk]
+            if best_i[kk] >= 0:
+                selected |= 1 << best_i[kk]
+                acc_p += best_p[kk]
+                n_valid += 1
+    total = acc / top_k
+    photo = OUT_COST
+    if n_valid > 0:
+        photo = acc_p / n_valid
+    return total, photo, selected
+
+
+@ti.func
 def _cost(
     i,
     j,
@@ -219,7 +318,6 @@ def _cost(
         counts as 1 (uninformative); the mean 1 - NCC of the selected valid sources (1 if none);
         and the bit mask of those sources.
     """
-    NW = ti.static(2 * R // STEP + 1)
     x = ti.Vector([j + 0.5, i + 0.5, 1.0])
     ray = kinv @ x
     X = d * ray
@@ -236,77 +334,12 @@ def _cost(
         for s in range(num_src):
             if (mask >> s) & 1 == 0:
                 continue
-            A = _mat3(A_all, s)
-            b = _vec3(b_all, s)
-            Hm = A + b.outer_product(m)
-            base = Hm @ x
-            c = 2.0 * OUT_COST  # larger than any valid cost: an invalid source is never inserted
-            cp = OUT_COST
-            ws = ti.cast(src_hw[s, 1], ti.f32)
-            hs = ti.cast(src_hw[s, 0], ti.f32)
-            if base.z > 1e-6:
-                iz = 1.0 / base.z
-                uc = base.x * iz
-                vc = base.y * iz
-                if uc >= 0.0 and vc >= 0.0 and uc < ws and vc < hs:
-                    # Jacobian of (u, v) w.r.t. the reference pixel offset (dx, dy)
-                    jux = (Hm[0, 0] - uc * Hm[2, 0]) * iz
-                    jvx = (Hm[1, 0] - vc * Hm[2, 0]) * iz
-                    juy = (Hm[0, 1] - uc * Hm[2, 1]) * iz
-                    jvy = (Hm[1, 1] - vc * Hm[2, 1]) * iz
-                    u0 = uc - 0.5
-                    v0 = vc - 0.5
-                    s1 = 0.0
-                    s2 = 0.0
-                    sx = 0.0
-                    for ky in ti.static(range(NW)):
-                        dy = ti.static(ky * STEP - R)
-                        for kx in ti.static(range(NW)):
-                            dx = ti.static(kx * STEP - R)
-                            val = _bilinear(
-                                src, s, u0 + dx * jux + dy * juy, v0 + dx * jvx + dy * jvy, ws, hs
-                            )
-                            wk = wn[i, j, ky * NW + kx]
-                            s1 += wk * val
-                            s2 += wk * val * val
-                            sx += rn[i, j, ky * NW + kx] * val
-                    var = s2 - s1 * s1
-                    cp = 1.0
-                    if var > 1e-8:
-                        cp = 1.0 - ti.min(ti.max(sx / ti.sqrt(var), -1.0), 1.0)
-                    c = cp
-                    if use_geom:
-                        Q = _mat3(Q_all, s)
-                        q = _vec3(q_all, s)
-                        err, _rel = _fb_error(s, x, d, A, b, Q, q, sdepth, src_hw)
-                        c += geom_w * ti.min(err, geom_max)
-            # insertion into the sorted list of the top_k smallest costs
-            si = s
-            for kk in ti.static(range(MAX_TOPK)):
-                if kk < top_k and c < best[kk]:
-                    tmp = best[kk]
-                    tmp_p = best_p[kk]
-                    tmp_i = best_i[kk]
-                    best[kk] = c
-                    best_p[kk] = cp
-                    best_i[kk] = si
-                    c = tmp
-                    cp = tmp_p
-                    si = tmp_i
-        acc = 0.0
-        acc_p = 0.0
-        n_valid = 0
-        for kk in ti.static(range(MAX_TOPK)):
-            if kk < top_k:
-                acc += best[kk]
-                if best_i[kk] >= 0:
-                    selected |= 1 << best_i[kk]
-                    acc_p += best_p[kk]
-                    n_valid += 1
-        total = acc / top_k
-        photo = OUT_COST
-        if n_valid > 0:
-            photo = acc_p / n_valid
+            c, cp = _source_cost(
+                i, j, s, x, d, m, wn, rn, src, src_hw, A_all, b_all, Q_all, q_all, sdepth,
+                use_geom, geom_w, geom_max, R, STEP,
+            )  # fmt: skip
+            best, best_p, best_i = _insert_top_k(best, best_p, best_i, c, cp, s, top_k)
+        total, photo, selected = _top_k_mean(best, best_p, best_i, top_k)
     return total, photo, selected
 
 
@@ -452,6 +485,58 @@ def _eval_all(
         sel[i, j] = m
 
 
+@ti.func
+def _neighbour_plane(i, j, k, ray, bn, kinv, depth: ti.template(), normal: ti.template()):
+    """Propagation candidate ``k``: the plane of neighbour k ((0,1),(0,-1),(1,0),(-1,0) at
+    distance 1, then 3) re-evaluated at this pixel's ``ray``, as (depth, normal); depth -1
+    (and normal ``bn``) where the neighbour lies outside the image or its plane is seen
+    edge-on or from behind along the ray."""
+    h, w = depth.shape[0], depth.shape[1]
+    cd = -1.0
+    cn = bn
+    dist = 1 + 2 * (k // 4)
+    sgn = 1 - 2 * (k % 2)
+    di = 0
+    dj = 0
+    if (k // 2) % 2 == 0:
+        dj = sgn * dist
+    else:
+        di = sgn * dist
+    i2 = i + di
+    j2 = j + dj
+    if i2 >= 0 and i2 < h and j2 >= 0 and j2 < w:
+        n2 = ti.Vector([normal[i2, j2, 0], normal[i2, j2, 1], normal[i2, j2, 2]])
+        X2 = depth[i2, j2] * (kinv @ ti.Vector([j2 + 0.5, i2 + 0.5, 1.0]))
+        den = n2.dot(ray)
+        if den < -1e-7:
+            cd = n2.dot(X2) / den
+            cn = n2
+    return cd, cn
+
+
+@ti.func
+def _random_plane(i, j, ray, inv_lo, inv_hi, salt):
+    """A random candidate plane: depth uniform in inverse depth, a random normal facing the
+    camera; (depth, normal)."""
+    cd = 1.0 / (inv_lo + _u01(i, j, salt, 0) * (inv_hi - inv_lo))
+    cn = _random_normal(ray, i, j, salt, 1)
+    return cd, cn
+
+
+@ti.func
+def _perturbed_plane(i, j, ray, bd, bn, scale, inv_lo, inv_hi, salt):
+    """The best plane (bd, bn) so far perturbed: its inverse depth by up to ``scale`` of the
+    inverse-depth span, its normal by noise of size ``scale``; (depth, normal), depth -1
+    (and normal ``bn``) where the depth leaves the range."""
+    cd = -1.0
+    cn = bn
+    inv_p = 1.0 / bd + (2.0 * _u01(i, j, salt, 7) - 1.0) * (inv_hi - inv_lo) * scale
+    if inv_p > inv_lo and inv_p < inv_hi:
+        cd = 1.0 / inv_p
+        cn = _perturb_normal(bn, ray, scale, i, j, salt, 8)
+    return cd, cn
+
+
 @ti.kernel
 def _sweep(
     color: ti.i32,
@@ -515,38 +600,17 @@ def _sweep(
                 cd = -1.0
                 cn = bn
                 if k < num_nb:
-                    # neighbour k: (0,1),(0,-1),(1,0),(-1,0) at distance 1 then 3
-                    dist = 1 + 2 * (k // 4)
-                    sgn = 1 - 2 * (k % 2)
-                    di = 0
-                    dj = 0
-                    if (k // 2) % 2 == 0:
-                        dj = sgn * dist
-                    else:
-                        di = sgn * dist
-                    i2 = i + di
-                    j2 = j + dj
-                    if i2 >= 0 and i2 < h and j2 >= 0 and j2 < w:
-                        n2 = ti.Vector([normal[i2, j2, 0], normal[i2, j2, 1], normal[i2, j2, 2]])
-                        X2 = depth[i2, j2] * (kinv @ ti.Vector([j2 + 0.5, i2 + 0.5, 1.0]))
-                        den = n2.dot(ray)
-                        if den < -1e-7:
-                            cd = n2.dot(X2) / den
-                            cn = n2
+                    cd, cn = _neighbour_plane(i, j, k, ray, bn, kinv, depth, normal)
                 elif k == num_nb:
                     if do_random:
-                        cd = 1.0 / (inv_lo + _u01(i, j, salt, 0) * (inv_hi - inv_lo))
-                        cn = _random_normal(ray, i, j, salt, 1)
+                        cd, cn = _random_plane(i, j, ray, inv_lo, inv_hi, salt)
                 elif k == num_nb + 2:
                     # the normal alone: once the depth is right, a joint perturbation rarely
                     # improves the normal because the depth step costs more than the tilt gains
                     cd = bd
                     cn = _perturb_normal(bn, ray, scale, i, j, salt, 14)
                 else:
-                    inv_p = 1.0 / bd + (2.0 * _u01(i, j, salt, 7) - 1.0) * (inv_hi - inv_lo) * scale
-                    if inv_p > inv_lo and inv_p < inv_hi:
-                        cd = 1.0 / inv_p
-                        cn = _perturb_normal(bn, ray, scale, i, j, salt, 8)
+                    cd, cn = _perturbed_plane(i, j, ray, bd, bn, scale, inv_lo, inv_hi, salt)
                 if cd >= dmin and cd <= dmax:
                     c2, p2, _m = _cost(
                         i, j, cd, cn, kinv, wn, rn, src, src_hw, A_all, b_all, Q_all, q_all,
@@ -635,8 +699,8 @@ class PatchMatchSolver:
 
     def __init__(self, cfg: PatchMatchConfig | None = None):
         self.cfg = cfg or PatchMatchConfig()
-        if _TI_ARCH is None:
-            init_taichi(seed=self.cfg.seed)
+        if taichi_arch() is None:
+            init_taichi("auto", -1, self.cfg.seed)
         r, step = self.cfg.window_radius, self.cfg.window_step
         if (2 * r) % step:
             raise ValueError(

@@ -157,11 +157,11 @@ def plot_depth_mosaic(
 
 
 def plot_planes(planes_npz: str | Path | None, out: str | Path) -> None:
-    """Top view of the plane fill's planes (:func:`scenebot.dense.planefill.save_planes`):
+    """Top view of the plane fill's planes (:func:`scenebot.dense.planes.store.save_planes`):
     the floor's and the ceiling's extents, each wall's and object face's extent (its cells
     seen from above, so a wall is a line), and the camera centres, in the map frame.
     ``planes_npz`` None: the plane fill is off, and the picture says so."""
-    from scenebot.dense.planefill import load_planes
+    from scenebot.dense.planes.store import load_planes
 
     fig, ax = plt.subplots(figsize=(8, 7))
     if planes_npz is None:

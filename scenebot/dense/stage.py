@@ -28,8 +28,9 @@ from scenebot.dense import workspace as ws
 from scenebot.dense.colmap_cuda import run_patch_match
 from scenebot.dense.colmap_io import read_array, write_array
 from scenebot.dense.config import DenseConfig
-from scenebot.dense.patchmatch import DepthResult, PatchMatchSolver, StereoView, init_taichi
+from scenebot.dense.patchmatch import DepthResult, PatchMatchSolver, StereoView
 from scenebot.dense.views import ViewPlan, select_views
+from scenebot.taichi_setup import init_taichi, taichi_arch
 
 LOG = logging.getLogger(__name__)
 
@@ -237,6 +238,53 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
     # its plane-completed ones would otherwise be completed instead of the new ones
     for kind in ("depth", "normal"):
         shutil.rmtree(dense_dir / "stereo" / f"{kind}_maps_measured", ignore_errors=True)
+    plans, isolated = _plan_views(cfg, rec)
+    ws.write_configs(dense_dir, {p.name: [rec.image(s).name for s in p.sources] for p in plans})
+    backend = choose_backend(cfg)
+    t0 = time.perf_counter()
+    if backend == "colmap_cuda":
+        view_stats = _run_colmap_cuda(cfg, plans, dense_dir)
+    else:
+        view_stats = _run_taichi(cfg, rec, plans, dense_dir)
+    t_depth = time.perf_counter() - t0
+    fill_stats = None
+    if cfg.plane_fill.enabled:
+        fill_stats = _run_plane_fill(cfg, rec, plans, dense_dir, view_stats)
+    t0 = time.perf_counter()
+    fused = fuse(cfg, dense_dir)
+    t_fusion = time.perf_counter() - t0
+    if cfg.poisson_mesh:
+        poisson_mesh(outputs.fused_ply, dense_dir / "meshed-poisson.ply", cfg.poisson_depth)
+    _add_plan_stats(view_stats, plans, rec)
+    summary = {
+        "backend": backend,
+        "taichi_arch": None if backend != "taichi" else taichi_arch(),
+        "num_views": len(plans),
+        "skipped_views": isolated,
+        "image_size": [rec.camera(rec.image(plans[0].image_id).camera_id).width,
+                       rec.camera(rec.image(plans[0].image_id).camera_id).height],
+        "num_fused_points": int(fused.num_points3D()),
+        "depth_seconds": t_depth,
+        "plane_fill": fill_stats,
+        "fusion_seconds": t_fusion,
+        "total_seconds": time.perf_counter() - t_start,
+        "config": cfg.model_dump(),
+        "views": view_stats,
+    }  # fmt: skip
+    if cfg.plots:
+        _plots(rec, plans, dense_dir, outputs.fused_ply, fill_stats is not None)
+    outputs.summary_json.write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def _plan_views(cfg: DenseConfig, rec: pycolmap.Reconstruction) -> tuple[list[ViewPlan], list]:
+    """The reference views with their sources (at most ``max_views``) and the names of the
+    views left out for want of an overlapping view.
+
+    Raises:
+        ValueError: views without any overlapping view (named) when ``skip_isolated_views``
+            is false, or no view with one.
+    """
     plans, isolated = select_views(
         rec,
         num_sources=cfg.num_source_views,
@@ -256,43 +304,46 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
         )
     for name in isolated:
         LOG.warning("dense: view %s has no overlapping view, skipped", name)
-    plans = _subsample(plans, cfg.max_views)
-    ws.write_configs(dense_dir, {p.name: [rec.image(s).name for s in p.sources] for p in plans})
-    backend = choose_backend(cfg)
-    t0 = time.perf_counter()
-    if backend == "colmap_cuda":
-        view_stats = _run_colmap_cuda(cfg, plans, dense_dir)
-    else:
-        view_stats = _run_taichi(cfg, rec, plans, dense_dir)
-    t_depth = time.perf_counter() - t0
-    fill_stats = None
-    if cfg.plane_fill.enabled:
-        from scenebot.dense.planefill import plane_fill
+    return _subsample(plans, cfg.max_views), isolated
 
-        fill_views = []
-        for p in plans:
-            img = rec.image(p.image_id)
-            pose = img.cam_from_world()
-            fill_views.append((p.name, rec.camera(img.camera_id).calibration_matrix(),
-                               pose.rotation.matrix(), np.asarray(pose.translation),
-                               p.depth_range))  # fmt: skip
-        fill_stats = plane_fill(dense_dir, fill_views, cfg.plane_fill)
-        by_name = {v["name"]: v for v in fill_stats.pop("views")}
-        for st in view_stats:
-            v = by_name.get(st["name"], {})
-            st["fraction_plane_filled"] = v.get("filled")
-            st["fraction_culled_behind_plane"] = v.get("culled")
-        LOG.info(
-            "dense: %d planes; %.1f %% of the pixels filled from them, %.1f %% of measured "
-            "depth behind a plane removed (%.0f s)",
-            len(fill_stats["planes"]), 100 * fill_stats["filled_fraction"],
-            100 * fill_stats["culled_fraction"], fill_stats["seconds"],
-        )  # fmt: skip
-    t0 = time.perf_counter()
-    fused = fuse(cfg, dense_dir)
-    t_fusion = time.perf_counter() - t0
-    if cfg.poisson_mesh:
-        poisson_mesh(outputs.fused_ply, dense_dir / "meshed-poisson.ply", cfg.poisson_depth)
+
+def _run_plane_fill(
+    cfg: DenseConfig,
+    rec: pycolmap.Reconstruction,
+    plans: list[ViewPlan],
+    dense_dir: Path,
+    view_stats: list[dict],
+) -> dict:
+    """Plane completion of the geometric maps; each view's share of pixels filled and culled
+    is added to its ``view_stats``. Returns the plane fill's stats without its views."""
+    from scenebot.dense.planefill import plane_fill
+
+    fill_views = []
+    for p in plans:
+        img = rec.image(p.image_id)
+        pose = img.cam_from_world()
+        fill_views.append((p.name, rec.camera(img.camera_id).calibration_matrix(),
+                           pose.rotation.matrix(), np.asarray(pose.translation),
+                           p.depth_range))  # fmt: skip
+    fill_stats = plane_fill(dense_dir, fill_views, cfg.plane_fill)
+    by_name = {v["name"]: v for v in fill_stats.pop("views")}
+    for st in view_stats:
+        v = by_name.get(st["name"], {})
+        st["fraction_plane_filled"] = v.get("filled")
+        st["fraction_culled_behind_plane"] = v.get("culled")
+    LOG.info(
+        "dense: %d planes; %.1f %% of the pixels filled from them, %.1f %% of measured "
+        "depth behind a plane removed (%.0f s)",
+        len(fill_stats["planes"]), 100 * fill_stats["filled_fraction"],
+        100 * fill_stats["culled_fraction"], fill_stats["seconds"],
+    )  # fmt: skip
+    return fill_stats
+
+
+def _add_plan_stats(
+    view_stats: list[dict], plans: list[ViewPlan], rec: pycolmap.Reconstruction
+) -> None:
+    """Add each view's sources, shared points, angles and depth range to its stats."""
     for p, st in zip(plans, view_stats, strict=True):
         st.update(
             sources=[rec.image(s).name for s in p.sources],
@@ -300,34 +351,25 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
             median_angle_deg=[round(a, 2) for a in p.median_angle_deg],
             depth_range=list(p.depth_range),
         )
-    summary = {
-        "backend": backend,
-        "taichi_arch": None if backend != "taichi" else init_taichi(),
-        "num_views": len(plans),
-        "skipped_views": isolated,
-        "image_size": [rec.camera(rec.image(plans[0].image_id).camera_id).width,
-                       rec.camera(rec.image(plans[0].image_id).camera_id).height],
-        "num_fused_points": int(fused.num_points3D()),
-        "depth_seconds": t_depth,
-        "plane_fill": fill_stats,
-        "fusion_seconds": t_fusion,
-        "total_seconds": time.perf_counter() - t_start,
-        "config": cfg.model_dump(),
-        "views": view_stats,
-    }  # fmt: skip
-    if cfg.plots:
-        from scenebot.dense import plots
 
-        plots.plot_fused_views(outputs.fused_ply, rec, dense_dir / "fused_views.png")
-        plots.plot_depth_mosaic(
-            dense_dir, [p.name for p in plans], dense_dir / "depth_normal_mosaic.png"
-        )
-        from scenebot.dense.planefill import PLANES_NPZ
 
-        planes_npz = dense_dir / PLANES_NPZ
-        if fill_stats is None:
-            planes_npz.unlink(missing_ok=True)  # a previous run's planes are not this run's
-        plots.plot_planes(planes_npz if fill_stats is not None else None,
-                          dense_dir / "planes.png")  # fmt: skip
-    outputs.summary_json.write_text(json.dumps(summary, indent=1))
-    return summary
+def _plots(
+    rec: pycolmap.Reconstruction,
+    plans: list[ViewPlan],
+    dense_dir: Path,
+    fused_ply: Path,
+    plane_filled: bool,
+) -> None:
+    """The fused cloud's views, the depth and normal mosaic and the planes from above (a
+    note that the plane fill is off when it did not run)."""
+    from scenebot.dense import plots
+    from scenebot.dense.planes.store import PLANES_NPZ
+
+    plots.plot_fused_views(fused_ply, rec, dense_dir / "fused_views.png")
+    plots.plot_depth_mosaic(
+        dense_dir, [p.name for p in plans], dense_dir / "depth_normal_mosaic.png"
+    )
+    planes_npz = dense_dir / PLANES_NPZ
+    if not plane_filled:
+        planes_npz.unlink(missing_ok=True)  # a previous run's planes are not this run's
+    plots.plot_planes(planes_npz if plane_filled else None, dense_dir / "planes.png")

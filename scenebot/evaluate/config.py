@@ -5,10 +5,12 @@ Kept free of heavy imports: the workflow loads every stage's config at start.
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
+
+from scenebot.settings import Settings
 
 
-class EvaluateConfig(BaseModel):
+class EvaluateConfig(Settings):
     """The evaluation of a round against the simulator's true scene (evaluation only).
 
     The observable surface (what completeness counts) is the part of the true mesh that a
@@ -16,8 +18,6 @@ class EvaluateConfig(BaseModel):
     sampled on a grid over the free space connected to the start (the simulator's obstacle
     map, robot radius), each with several headings.
     """
-
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
     grid_step_m: float = Field(
         0.25, gt=0.01, description="Spacing (m) of the robot positions sampled in free space."

@@ -83,17 +83,17 @@ def _summary(rows: list[dict], kind: str, rel_tol: float) -> dict | None:
     }
 
 
-def evaluate_depth_maps(
-    dense_dir: Path, sim, scene, rel_tol: float = 0.02, max_views: int = 0
-) -> dict:
+def evaluate_depth_maps(dense_dir: Path, sim, scene, rel_tol: float, max_views: int) -> dict:
     """Every view's measured and final depth map against the truth.
 
     Args:
         dense_dir: the dense workspace (``final/dense``: ``sparse/`` and ``stereo/``).
         sim: the map -> world similarity of the map the workspace was built from.
         scene: the true :class:`~scenebot.scene.mesh.SceneMesh`.
-        rel_tol: a depth is right within this share of the true depth.
-        max_views: evaluate at most this many views, evenly spread (0: all).
+        rel_tol: a depth is right within this share of the true depth
+            (``evaluate.depth_rel_tol``).
+        max_views: evaluate at most this many views, evenly spread (0: all;
+            ``evaluate.depth_map_views``).
 
     Returns:
         ``views`` (per view: ``name``, and per kind ``coverage``, ``accuracy`` (the share

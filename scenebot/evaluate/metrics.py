@@ -135,7 +135,8 @@ def weighted_cloud_metrics(
     triangles: np.ndarray,
     reference: np.ndarray,
     weights: np.ndarray | None = None,
-    thresholds_m: Sequence[float] = (0.01, 0.02, 0.05),
+    *,
+    thresholds_m: Sequence[float],
     return_distances: bool = False,
 ) -> dict[str, dict[str, float]] | tuple[dict[str, dict[str, float]], np.ndarray]:
     """Accuracy, area-weighted completeness and F-score of a cloud (world frame).
@@ -188,8 +189,9 @@ def weighted_cloud_metrics(
     return (out, d_comp) if return_distances else out
 
 
-def read_cloud(path: Path, max_points: int, seed: int = 0) -> np.ndarray:
-    """(N, 3) points of a PLY cloud, randomly subsampled (seeded) to ``max_points``."""
+def read_cloud(path: Path, max_points: int, seed: int) -> np.ndarray:
+    """(N, 3) points of a PLY cloud, randomly subsampled (``seed``: ``evaluate.seed``) to
+    ``max_points`` (``evaluate.max_cloud_points``)."""
     import open3d as o3d
 
     path = Path(path)
@@ -360,7 +362,7 @@ def _summary(errs: list[tuple[str, float, float | None]]) -> dict:
 def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
     """Visual-localization estimates in the capture logs (map frame) against the true poses.
 
-    Two kinds of records are read (adaptive rounds; see :mod:`scenebot.adaptive`):
+    Two kinds of records are read (adaptive rounds; see :mod:`scenebot.capture.adaptive`):
 
     * ``fixes``: events ``localize`` (a successful visual fix while following a path); their
       ``localization`` is a camera pose (``center``, ``R_cam_from_world``), compared with the

@@ -256,7 +256,8 @@ def sample_surface_weighted(
     vertices: np.ndarray,
     triangles: np.ndarray,
     spacing_m: float,
-    seed: int = 0,
+    *,
+    seed: int,
     max_samples: int = 20_000_000,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Area-stratified random samples of a triangle mesh.
@@ -265,7 +266,7 @@ def sample_surface_weighted(
         vertices: (V, 3) metres.
         triangles: (T, 3) indices.
         spacing_m: mean spacing (m): triangle i gets ``max(1, round(area_i / spacing^2))``.
-        seed: random seed.
+        seed: random seed (``evaluate.seed``).
         max_samples: refuse to draw more (raise ``spacing_m`` instead).
 
     Returns:
@@ -297,15 +298,174 @@ def sample_surface_weighted(
 
 
 # -------------------------------------------------------------------------------- visibility
+def _half_diagonal_fov(intr: Intrinsics) -> float:
+    """Half angle of the image diagonal, plus 0.5 deg: no pixel's ray is farther from the
+    optical axis (rad)."""
+    diag = math.atan(math.hypot(intr.width / 2 / intr.fx, intr.height / 2 / intr.fy))
+    diag += math.radians(0.5)
+    return diag
+
+
+def _robot_positions(views: Viewpoints, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Group the poses by robot position.
+
+    Returns:
+        The positions' group numbers in a seeded random order, (P,) the group of each pose,
+        and the largest offset of a camera centre from its robot's axis (m, plus 1 um).
+    """
+    _, first, group = np.unique(views.robot_xy, axis=0, return_index=True, return_inverse=True)
+    group = group.ravel()
+    offs = np.linalg.norm(views.centers[:, :2] - views.robot_xy, axis=1)
+    r_off = float(offs.max()) + 1e-6
+    order = np.random.default_rng(seed).permutation(len(first))
+    return order, group, r_off
+
+
+@dataclass
+class _Nearby:
+    """The unseen points that some heading at one robot position may have in its image.
+
+    Attributes:
+        idx: (N,) point indices.
+        az: (N,) their azimuths from the robot's position (rad), or None for pitched cameras
+            (no azimuth bound).
+        margin: (N,) azimuth widening (rad) for the camera centre's offset from the axis.
+    """
+
+    idx: np.ndarray
+    az: np.ndarray | None = None
+    margin: np.ndarray | None = None
+
+    def for_heading(self, R: np.ndarray, seen: np.ndarray, diag: float) -> np.ndarray:
+        """The points still unseen that the view ``R`` (cam_from_world) may have in its image."""
+        if self.az is None:
+            return self.idx[~seen[self.idx]]
+        fwd = R[2]
+        da = np.abs((self.az - math.atan2(fwd[1], fwd[0]) + np.pi) % (2 * np.pi) - np.pi)
+        sub = self.idx[da <= diag + self.margin]
+        return sub[~seen[sub]]
+
+
+def _nearby(
+    pts: np.ndarray,
+    idx: np.ndarray,
+    views: Viewpoints,
+    poses: np.ndarray,
+    diag: float,
+    r_off: float,
+    max_range_m: float | None,
+) -> _Nearby:
+    """Keep the points ``idx`` whose elevation (and range) some pose of ``poses`` (one robot
+    position) can see: a conservative bound over all its headings."""
+    base = np.r_[views.robot_xy[poses[0]], views.centers[poses[0], 2]]
+    d0 = pts[idx] - base
+    dh = np.hypot(d0[:, 0], d0[:, 1])
+    # elevation closest to the horizon over all camera centres within r_off of the axis
+    elev = np.arctan2(d0[:, 2], dh + r_off)
+    pitches = [math.asin(np.clip(views.R[k][2, 2], -1, 1)) for k in poses]
+    band = (elev <= max(pitches) + diag) & (elev >= min(pitches) - diag)
+    if max_range_m is not None:
+        band &= np.hypot(dh, d0[:, 2]) <= max_range_m + r_off
+    idx = idx[band]
+    level = max(abs(p) for p in pitches) < 1e-9
+    if idx.size == 0 or not level:
+        return _Nearby(idx)
+    # azimuth bound (valid for level cameras: |azimuth offset| <= hfov / 2)
+    az = np.arctan2(d0[band, 1], d0[band, 0])
+    dhb = dh[band]
+    # the camera centre is up to r_off off the axis: widen by asin(r_off / distance)
+    margin = np.arcsin(np.clip(r_off / np.maximum(dhb, 1e-9), 0.0, 1.0))
+    margin[dhb <= 2 * r_off] = np.pi
+    return _Nearby(idx, az, margin)
+
+
+@dataclass
+class _ViewTest:
+    """The exact test of whether one view sees points: framing, range, incidence, occlusion.
+
+    Attributes:
+        pts: (M, 3) surface points (m).
+        normals: (M, 3) their unit normals.
+        intr: the pinhole camera.
+        raycaster: an ``open3d.t.geometry.RaycastingScene`` of the mesh.
+        near_m: nearer points (along the camera axis) are not seen.
+        max_range_m: farther points are not seen (None: no limit).
+        cos_max: cosine of the largest incidence angle (-1: any angle).
+        point_triangle: (M,) triangle of each point, or None (then any surface within 3 mm
+            of the point counts as the point).
+        triangle_normals_: (T, 3) unit normals of the mesh's triangles (with
+            ``point_triangle``).
+    """
+
+    pts: np.ndarray
+    normals: np.ndarray
+    intr: Intrinsics
+    raycaster: object
+    near_m: float
+    max_range_m: float | None
+    cos_max: float
+    point_triangle: np.ndarray | None
+    triangle_normals_: np.ndarray | None
+
+    def visible(self, sub: np.ndarray, c: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """The points of ``sub`` that the view (centre ``c``, cam_from_world ``R``) sees."""
+        d = self.pts[sub] - c
+        inside, dist = self._framed(sub, d, R)
+        cand = np.flatnonzero(inside)
+        if cand.size == 0:
+            return cand
+        vis = self._unoccluded(sub[cand], c, d[cand], dist[cand])
+        return sub[cand[vis]]
+
+    def _framed(self, sub: np.ndarray, d: np.ndarray, R: np.ndarray):
+        """Inside the image, in front of the camera, in range, not too oblique: (mask,
+        distances) of the points ``sub`` at offsets ``d`` from the camera centre."""
+        intr = self.intr
+        pc = d @ R.T
+        z = pc[:, 2]
+        inside = z > self.near_m
+        zi = np.where(inside, z, 1.0)
+        u = intr.fx * pc[:, 0] / zi + intr.cx
+        v = intr.fy * pc[:, 1] / zi + intr.cy
+        inside &= (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
+        dist = np.linalg.norm(d, axis=1)
+        if self.max_range_m is not None:
+            inside &= dist <= self.max_range_m
+        if self.cos_max > -1.0:
+            cos_inc = np.abs(np.sum(self.normals[sub] * d, axis=1)) / np.maximum(dist, 1e-12)
+            inside &= cos_inc >= self.cos_max
+        return inside, dist
+
+    def _unoccluded(self, sub: np.ndarray, c: np.ndarray, d: np.ndarray, dist: np.ndarray):
+        """Which points ``sub`` (offsets ``d``, distances ``dist``) the ray from ``c`` reaches
+        (see :func:`observable_mask`)."""
+        import open3d as o3d
+
+        dirs = d / dist[:, None]
+        rays = np.concatenate([np.broadcast_to(c, dirs.shape), dirs], axis=1)
+        ans = self.raycaster.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+        thit = ans["t_hit"].numpy()
+        vis = thit >= dist - np.maximum(0.003, 1e-3 * dist)
+        if self.point_triangle is not None and self.triangle_normals_ is not None:
+            prim = ans["primitive_ids"].numpy().astype(np.int64)
+            own = self.point_triangle[sub]
+            tn = self.triangle_normals_
+            hit = np.clip(prim, 0, len(tn) - 1)
+            parallel = np.abs(np.sum(tn[hit] * self.normals[sub], 1)) > 0.999
+            vis = (prim == own) | (vis & parallel)
+        return vis
+
+
 def observable_mask(
     points: np.ndarray,
     normals: np.ndarray,
     views: Viewpoints,
     raycaster,
-    max_range_m: float | None = None,
-    max_incidence_deg: float = 90.0,
+    *,
+    max_range_m: float | None,
+    max_incidence_deg: float,
+    seed: int,
     near_m: float = 0.05,
-    seed: int = 0,
     point_triangle: np.ndarray | None = None,
     triangle_normals_: np.ndarray | None = None,
 ) -> np.ndarray:
@@ -328,11 +488,11 @@ def observable_mask(
         normals: (M, 3) unit surface normals (either orientation: surfaces are two-sided).
         views: the viewpoints (consecutive poses sharing a robot position are grouped).
         raycaster: an ``open3d.t.geometry.RaycastingScene`` of the same mesh.
-        max_range_m: farther points are not seen (None: no limit).
+        max_range_m: farther points are not seen (None: no limit; ``evaluate.max_range_m``).
         max_incidence_deg: points seen more obliquely (angle between the ray and the normal)
-            are not seen.
+            are not seen (``evaluate.max_incidence_deg``).
+        seed: seed of the visiting order (``evaluate.seed``).
         near_m: points closer to the camera than this (along its axis) are not seen.
-        seed: seed of the visiting order.
         point_triangle: (M,) triangle index of each point (in the raycaster's mesh).
         triangle_normals_: (T, 3) unit normals of the mesh's triangles (with
             ``point_triangle``).
@@ -340,90 +500,36 @@ def observable_mask(
     Returns:
         (M,) bool.
     """
-    import open3d as o3d
-
-    exact = point_triangle is not None and triangle_normals_ is not None
-
     pts = np.asarray(points, np.float64)
     seen = np.zeros(len(pts), bool)
-    intr = views.intrinsics
     cos_max = math.cos(math.radians(max_incidence_deg)) if max_incidence_deg < 90 else -1.0
-    # half angle of the image diagonal: no pixel's ray is farther from the optical axis
-    diag = math.atan(math.hypot(intr.width / 2 / intr.fx, intr.height / 2 / intr.fy))
-    diag += math.radians(0.5)
+    test = _ViewTest(
+        pts=pts,
+        normals=normals,
+        intr=views.intrinsics,
+        raycaster=raycaster,
+        near_m=near_m,
+        max_range_m=max_range_m,
+        cos_max=cos_max,
+        point_triangle=point_triangle,
+        triangle_normals_=triangle_normals_,
+    )
+    diag = _half_diagonal_fov(views.intrinsics)
     if len(views.centers) == 0:
         return seen
-    # group the poses by robot position
-    _, first, group = np.unique(views.robot_xy, axis=0, return_index=True, return_inverse=True)
-    group = group.ravel()
-    offs = np.linalg.norm(views.centers[:, :2] - views.robot_xy, axis=1)
-    r_off = float(offs.max()) + 1e-6
-    order = np.random.default_rng(seed).permutation(len(first))
+    order, group, r_off = _robot_positions(views, seed)
     for g in order:
         idx = np.flatnonzero(~seen)
         if idx.size == 0:
             break
         poses = np.flatnonzero(group == g)
-        base = np.r_[views.robot_xy[poses[0]], views.centers[poses[0], 2]]
-        d0 = pts[idx] - base
-        dh = np.hypot(d0[:, 0], d0[:, 1])
-        # elevation closest to the horizon over all camera centres within r_off of the axis
-        elev = np.arctan2(d0[:, 2], dh + r_off)
-        pitches = [math.asin(np.clip(views.R[k][2, 2], -1, 1)) for k in poses]
-        band = (elev <= max(pitches) + diag) & (elev >= min(pitches) - diag)
-        if max_range_m is not None:
-            band &= np.hypot(dh, d0[:, 2]) <= max_range_m + r_off
-        idx = idx[band]
-        if idx.size == 0:
+        nearby = _nearby(pts, idx, views, poses, diag, r_off, max_range_m)
+        if nearby.idx.size == 0:
             continue
-        level = max(abs(p) for p in pitches) < 1e-9
-        if level:  # azimuth bound (valid for level cameras: |azimuth offset| <= hfov / 2)
-            az = np.arctan2(d0[band, 1], d0[band, 0])
-            dhb = dh[band]
-            # the camera centre is up to r_off off the axis: widen by asin(r_off / distance)
-            margin = np.arcsin(np.clip(r_off / np.maximum(dhb, 1e-9), 0.0, 1.0))
-            margin[dhb <= 2 * r_off] = np.pi
         for k in poses:
-            if level:
-                fwd = views.R[k][2]
-                da = np.abs((az - math.atan2(fwd[1], fwd[0]) + np.pi) % (2 * np.pi) - np.pi)
-                sub = idx[da <= diag + margin]
-                sub = sub[~seen[sub]]
-            else:
-                sub = idx[~seen[idx]]
-            if sub.size == 0:
-                continue
-            c, R = views.centers[k], views.R[k]
-            d = pts[sub] - c
-            pc = d @ R.T
-            z = pc[:, 2]
-            inside = z > near_m
-            zi = np.where(inside, z, 1.0)
-            u = intr.fx * pc[:, 0] / zi + intr.cx
-            v = intr.fy * pc[:, 1] / zi + intr.cy
-            inside &= (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
-            dist = np.linalg.norm(d, axis=1)
-            if max_range_m is not None:
-                inside &= dist <= max_range_m
-            if cos_max > -1.0:
-                cos_inc = np.abs(np.sum(normals[sub] * d, axis=1)) / np.maximum(dist, 1e-12)
-                inside &= cos_inc >= cos_max
-            cand = np.flatnonzero(inside)
-            if cand.size == 0:
-                continue
-            dc = dist[cand]
-            dirs = d[cand] / dc[:, None]
-            rays = np.concatenate([np.broadcast_to(c, dirs.shape), dirs], axis=1)
-            ans = raycaster.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
-            thit = ans["t_hit"].numpy()
-            vis = thit >= dc - np.maximum(0.003, 1e-3 * dc)
-            if exact:
-                prim = ans["primitive_ids"].numpy().astype(np.int64)
-                own = point_triangle[sub[cand]]
-                hit = np.clip(prim, 0, len(triangle_normals_) - 1)
-                parallel = np.abs(np.sum(triangle_normals_[hit] * normals[sub[cand]], 1)) > 0.999
-                vis = (prim == own) | (vis & parallel)
-            seen[sub[cand[vis]]] = True
+            sub = nearby.for_heading(views.R[k], seen, diag)
+            if sub.size:
+                seen[test.visible(sub, views.centers[k], views.R[k])] = True
     return seen
 
 
@@ -507,13 +613,14 @@ def observable_surface(
             "lower evaluate.grid_step_m"
         )
     pts, weights, tid = sample_surface_weighted(
-        scene.vertices, scene.triangles, ecfg.sample_spacing_m, ecfg.seed
+        scene.vertices, scene.triangles, ecfg.sample_spacing_m, seed=ecfg.seed
     )
     normals, _ = triangle_normals(scene.vertices, scene.triangles)
     rc = mesh_raycaster(scene.vertices, scene.triangles)
     seen = observable_mask(
-        pts, normals[tid], views, rc, ecfg.max_range_m, ecfg.max_incidence_deg, seed=ecfg.seed,
-        point_triangle=tid, triangle_normals_=normals,
+        pts, normals[tid], views, rc, max_range_m=ecfg.max_range_m,
+        max_incidence_deg=ecfg.max_incidence_deg, seed=ecfg.seed, point_triangle=tid,
+        triangle_normals_=normals,
     )  # fmt: skip
     positions = views.robot_xy[:: ecfg.headings]
     surf = ObservableSurface(

@@ -242,7 +242,7 @@ def run(
             cloud = sim.apply(read_cloud(inputs.dense_cloud, ecfg.max_cloud_points, ecfg.seed))
             m, d_comp = weighted_cloud_metrics(
                 cloud, sc.vertices, sc.triangles, surf.observable_points,
-                surf.observable_weights, ecfg.thresholds_m, return_distances=True,
+                surf.observable_weights, thresholds_m=ecfg.thresholds_m, return_distances=True,
             )  # fmt: skip
             out["dense"] = {"cloud": str(inputs.dense_cloud), "points": len(cloud), **m}
             # one visibility render per photo, in capture order: the view counts of the

@@ -79,7 +79,7 @@ def spearman(a: np.ndarray, b: np.ndarray) -> float:
     return float(spearmanr(a, b).statistic)
 
 
-def bootstrap_interval(a, b, n: int = 1000, seed: int = 0) -> tuple[float, float]:
+def bootstrap_interval(a, b, n: int = 1000, *, seed: int) -> tuple[float, float]:
     """95% percentile-bootstrap interval of :func:`spearman` over the pairs."""
     from scipy.stats import rankdata
 
@@ -152,6 +152,210 @@ def pick_candidates(cands: dict, m: int, min_hit: float, seed: int) -> np.ndarra
     return rng.choice(idx, size=min(m, len(idx)), replace=False)
 
 
+@dataclass
+class _Synthesis:
+    """Round ``r``'s ULR renderer on the campaign's dense cloud, and the camera it renders.
+
+    Attributes:
+        ulr: the :class:`~scenebot.tour.ulr.UlrRenderer`.
+        cam: the novel views' pinhole :class:`~scenebot.tour.camera.Camera`.
+        proxy: the dense cloud in round ``r``'s frame.
+        sources: round ``r``'s photos.
+        scale: scale of the similarity from the dense cloud's map to round ``r``'s.
+        shared_photos: photos registered in both maps (that similarity's support).
+    """
+
+    ulr: object
+    cam: object
+    proxy: object
+    sources: list
+    scale: float
+    shared_photos: int
+
+
+def _synthesis(cfg, inputs: ValidityInputs, rdir: Path) -> _Synthesis:
+    """The renderer: round r's photos, the dense cloud moved into round r's frame."""
+    import pycolmap
+
+    from scenebot.taichi_setup import init_taichi
+    from scenebot.tour.camera import Camera
+    from scenebot.tour.proxy import build_proxy, load_proxy
+    from scenebot.tour.ulr import UlrRenderer, load_sources
+
+    init_taichi(cfg.tour.taichi_arch, cfg.tour.num_threads)
+    s, R, t, n_common = model_similarity(Path(inputs.dense_sfm_dir), rdir / "sfm")
+    dense = load_proxy(inputs.dense_ply, cfg.tour.proxy)
+    proxy = build_proxy(
+        s * dense.points.astype(np.float64) @ R.T + t,
+        dense.normals.astype(np.float64) @ R.T,
+        dense.colors.astype(np.float64) / 255.0,
+        cfg.tour.proxy,
+        source=str(inputs.dense_ply),
+    )
+    sources = load_sources(pycolmap.Reconstruction(str(rdir / "sfm")), inputs.image_dir)
+    ulr = UlrRenderer(proxy, sources, cfg.tour)
+    ecfg = cfg.evaluate
+    cam = Camera.pinhole(ecfg.validity_width, ecfg.validity_height, cfg.sim.camera.hfov_deg)
+    return _Synthesis(ulr, cam, proxy, sources, s, n_common)
+
+
+@dataclass
+class _Truth:
+    """The simulator's renderer of the true scene (no sensor noise) at round-frame poses.
+
+    Attributes:
+        to_world: similarity from round ``r``'s frame to the world.
+        renderer: the :class:`~scenebot.sim.renderer.Renderer`.
+        intr: its pinhole camera (the validity size).
+    """
+
+    to_world: object
+    renderer: object
+    intr: object
+
+    def render(self, Rc: np.ndarray, tc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(image, depth) of the true scene from cam_from_world (Rc, tc) in round r's frame."""
+        c_robot = -Rc.T @ tc
+        c_world = self.to_world.apply(c_robot[None])[0]
+        R_world = Rc @ self.to_world.R.T
+        return self.renderer.render(self.intr, R_world, c_world, return_depth=True)
+
+
+def _truth(cfg, inputs: ValidityInputs, rdir: Path, scene) -> _Truth:
+    """The truth: round r's frame -> world, the simulator's renderer without sensor noise."""
+    from scenebot.geometry import Intrinsics
+    from scenebot.scene.loader import load_world_scene
+    from scenebot.sim.renderer import Renderer
+
+    to_world = robot_to_world(rdir / "sfm", inputs.captures)
+    sc = scene if scene is not None else load_world_scene(cfg.world)
+    cam_cfg = cfg.sim.camera
+    w, h = cfg.evaluate.validity_width, cfg.evaluate.validity_height
+    renderer = Renderer(sc, noise_sigma=0.0, antialias=cam_cfg.antialias)
+    return _Truth(to_world, renderer, Intrinsics.from_hfov(w, h, cam_cfg.hfov_deg))
+
+
+def _candidates_in_order(cfg, rdir: Path) -> tuple[dict, np.ndarray]:
+    """Round r's scored candidates, and every usable one's index in a seeded random order."""
+    from scenebot.artifacts.candidates import read_candidates
+
+    cand_csv = rdir / "candidates.csv"
+    if not cand_csv.is_file():
+        raise EvaluationError(f"{cand_csv} not found: run the score stage of {rdir.name} first")
+    cands = read_candidates(cand_csv)
+    order = pick_candidates(
+        cands, len(cands["score_deg"]), cfg.goals.min_hit_fraction, cfg.evaluate.seed
+    )
+    return cands, order
+
+
+def _compare_views(
+    cands: dict, order: np.ndarray, m: int, synth: _Synthesis, truth: _Truth, progress: bool
+) -> tuple[list[dict], list[dict]]:
+    """Synthesize and truly render the candidates in ``order`` until ``m`` have a true view.
+
+    Returns:
+        A row per compared candidate (:func:`_row`), and the candidates left out for want
+        of a true view (index, true hit fraction, true median depth).
+    """
+    from tqdm import tqdm
+
+    rows, excluded = [], []
+    bar = tqdm(total=min(m, len(order)), desc="score validity", unit="view", disable=not progress)
+    for i in order:
+        if len(rows) >= m:
+            break
+        x, y, th = (float(cands[k][i]) for k in ("x", "y", "theta"))
+        Rc, tc = _candidate_pose(x, y, th)
+        true, true_depth = truth.render(Rc, tc)
+        hit = np.isfinite(true_depth)
+        near = float(np.median(true_depth[hit])) if hit.any() else None
+        if hit.mean() < MIN_TRUE_HIT or near is None or near < MIN_TRUE_DEPTH_M:
+            # the map's free space put this pose inside, against or outside the true scene:
+            # no view there to synthesize, so it says nothing about the score
+            excluded.append({"index": int(i), "true_hit_fraction": float(hit.mean()),
+                             "true_median_depth_m": near})  # fmt: skip
+            continue
+        res = synth.ulr.render(synth.cam, Rc, tc)
+        bar.update()
+        rows.append(_row(cands, i, (x, y, th), res, true))
+    bar.close()
+    return rows, excluded
+
+
+def _row(cands: dict, i, pose: tuple[float, float, float], res, true: np.ndarray) -> dict:
+    """One compared candidate: its pose and scores, and the quality of its ULR render."""
+    from scenebot.tour.evaluate import psnr, ssim
+
+    x, y, th = pose
+    return {
+        "index": int(i),
+        "x": x,
+        "y": y,
+        "theta": th,
+        "score_deg": float(cands["score_deg"][i]),
+        "hit_fraction": float(cands["hit_fraction"][i]),
+        "seen_fraction": float(cands["seen_fraction"][i]),
+        "coverage": float(res.coverage),
+        "psnr": min(psnr(res.image, true), PSNR_CAP_DB),
+        "ssim": ssim(res.image, true),
+    }
+
+
+def _too_few_views(rows: list, excluded: list[dict], order: np.ndarray, rdir: Path):
+    """The error for fewer than 3 candidates with a true view: why the others had none."""
+    open_view = sum(e["true_hit_fraction"] < MIN_TRUE_HIT for e in excluded)
+    return EvaluationError(
+        f"only {len(rows)} of {len(order)} usable candidates of {rdir.name} have a true view: "
+        f"{open_view} look mostly past the true scene (< {MIN_TRUE_HIT:.0%} of pixels on "
+        f"it), {len(excluded) - open_view} stand against or inside it (median true depth "
+        f"< {MIN_TRUE_DEPTH_M} m); too few for a correlation. The map of {rdir.name} "
+        "disagrees with the truth there: see its sfm/accuracy.json and freespace.png"
+    )
+
+
+def _summary(
+    rows: list[dict],
+    excluded: list[dict],
+    cands: dict,
+    rdir: Path,
+    inputs: ValidityInputs,
+    synth: _Synthesis,
+    ecfg,
+    t0: float,
+) -> dict:
+    """The correlations of the score with the render quality, and what they rest on."""
+    score = np.array([r["score_deg"] for r in rows])
+    quality = np.array([r["psnr"] for r in rows])
+    covered = np.array([r["coverage"] for r in rows]) >= 0.5
+    lo, hi = bootstrap_interval(score, quality, seed=ecfg.seed)
+    return {
+        "round": rdir.name,
+        "candidates": len(rows),
+        "candidates_scored": int(np.isfinite(cands["score_deg"]).sum()),
+        "candidates_examined": len(rows) + len(excluded),
+        "spearman_score_psnr": spearman(score, quality),
+        "spearman_95ci": [lo, hi],
+        "spearman_score_ssim": spearman(score, [r["ssim"] for r in rows]),
+        "spearman_seen_fraction_psnr": spearman([r["seen_fraction"] for r in rows], quality),
+        "spearman_score_psnr_proxy_covered": spearman(score[covered], quality[covered]),
+        "proxy_covered_candidates": int(covered.sum()),
+        "excluded_no_true_view": excluded,
+        "psnr_db": {"median": float(np.median(quality)), "mean": float(np.mean(quality))},
+        "score_deg": {"median": float(np.median(score)), "max": float(np.max(score))},
+        "size": [ecfg.validity_width, ecfg.validity_height],
+        "proxy": {
+            "dense": str(inputs.dense_ply),
+            "points": len(synth.proxy),
+            "to_round_frame_scale": synth.scale,
+            "shared_photos": synth.shared_photos,
+        },
+        "sources": len(synth.sources),
+        "seconds": time.perf_counter() - t0,
+        "rows": rows,
+    }
+
+
 def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | None = None,
                  progress: bool = True, scene=None) -> dict:  # fmt: skip
     """Score vs synthesized-view quality for random candidates of one round.
@@ -171,19 +375,7 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
     Raises:
         EvaluationError: missing inputs, too few candidates, or no true scene.
     """
-    import pycolmap
-    from tqdm import tqdm
-
     from scenebot.evaluate.stage import has_scene_truth
-    from scenebot.geometry import Intrinsics
-    from scenebot.scene.loader import load_world_scene
-    from scenebot.score.candidates import read_candidates
-    from scenebot.sim.renderer import Renderer
-    from scenebot.tour._ti import init_taichi
-    from scenebot.tour.camera import Camera
-    from scenebot.tour.evaluate import psnr, ssim
-    from scenebot.tour.proxy import build_proxy, load_proxy
-    from scenebot.tour.ulr import UlrRenderer, load_sources
 
     ecfg = cfg.evaluate
     if not has_scene_truth(cfg):
@@ -192,120 +384,23 @@ def run_validity(cfg, inputs: ValidityInputs, out_json: Path, out_png: Path | No
         )
     t0 = time.perf_counter()
     rdir = Path(inputs.round_dir)
-    cand_csv = rdir / "candidates.csv"
-    if not cand_csv.is_file():
-        raise EvaluationError(f"{cand_csv} not found: run the score stage of {rdir.name} first")
-    cands = read_candidates(cand_csv)
     # every usable candidate in a seeded random order; the first M with a true view are kept
-    order = pick_candidates(cands, len(cands["score_deg"]), cfg.goals.min_hit_fraction, ecfg.seed)
-    m = ecfg.validity_candidates
-
-    # the renderer: round r's photos, the dense cloud moved into round r's frame
-    init_taichi(cfg.tour.taichi_arch, cfg.tour.num_threads)
-    s, R, t, n_common = model_similarity(Path(inputs.dense_sfm_dir), rdir / "sfm")
-    dense = load_proxy(inputs.dense_ply, cfg.tour.proxy)
-    proxy = build_proxy(
-        s * dense.points.astype(np.float64) @ R.T + t,
-        dense.normals.astype(np.float64) @ R.T,
-        dense.colors.astype(np.float64) / 255.0,
-        cfg.tour.proxy,
-        source=str(inputs.dense_ply),
-    )
-    sources = load_sources(pycolmap.Reconstruction(str(rdir / "sfm")), inputs.image_dir)
-    ulr = UlrRenderer(proxy, sources, cfg.tour)
-
-    # the truth: round r's frame -> world, the simulator's renderer without sensor noise
-    to_world = robot_to_world(rdir / "sfm", inputs.captures)
-    sc = scene if scene is not None else load_world_scene(cfg.world)
-    cam_cfg = cfg.sim.camera
-    w, h = ecfg.validity_width, ecfg.validity_height
-    truth_renderer = Renderer(sc, noise_sigma=0.0, antialias=cam_cfg.antialias)
-    intr = Intrinsics.from_hfov(w, h, cam_cfg.hfov_deg)
-    cam = Camera.pinhole(w, h, cam_cfg.hfov_deg)
-
-    rows, excluded = [], []
-    bar = tqdm(total=min(m, len(order)), desc="score validity", unit="view", disable=not progress)
-    for i in order:
-        if len(rows) >= m:
-            break
-        x, y, th = (float(cands[k][i]) for k in ("x", "y", "theta"))
-        Rc, tc = _candidate_pose(x, y, th)
-        c_robot = -Rc.T @ tc
-        c_world = to_world.apply(c_robot[None])[0]
-        R_world = Rc @ to_world.R.T
-        true, true_depth = truth_renderer.render(intr, R_world, c_world, return_depth=True)
-        hit = np.isfinite(true_depth)
-        near = float(np.median(true_depth[hit])) if hit.any() else None
-        if hit.mean() < MIN_TRUE_HIT or near is None or near < MIN_TRUE_DEPTH_M:
-            # the map's free space put this pose inside, against or outside the true scene:
-            # no view there to synthesize, so it says nothing about the score
-            excluded.append({"index": int(i), "true_hit_fraction": float(hit.mean()),
-                             "true_median_depth_m": near})  # fmt: skip
-            continue
-        res = ulr.render(cam, Rc, tc)
-        bar.update()
-        rows.append(
-            {
-                "index": int(i),
-                "x": x,
-                "y": y,
-                "theta": th,
-                "score_deg": float(cands["score_deg"][i]),
-                "hit_fraction": float(cands["hit_fraction"][i]),
-                "seen_fraction": float(cands["seen_fraction"][i]),
-                "coverage": float(res.coverage),
-                "psnr": min(psnr(res.image, true), PSNR_CAP_DB),
-                "ssim": ssim(res.image, true),
-            }
-        )
-    bar.close()
+    cands, order = _candidates_in_order(cfg, rdir)
+    synth = _synthesis(cfg, inputs, rdir)
+    truth = _truth(cfg, inputs, rdir, scene)
+    rows, excluded = _compare_views(cands, order, ecfg.validity_candidates, synth, truth, progress)
     if len(rows) < 3:
-        open_view = sum(e["true_hit_fraction"] < MIN_TRUE_HIT for e in excluded)
-        raise EvaluationError(
-            f"only {len(rows)} of {len(order)} usable candidates of {rdir.name} have a true view: "
-            f"{open_view} look mostly past the true scene (< {MIN_TRUE_HIT:.0%} of pixels on "
-            f"it), {len(excluded) - open_view} stand against or inside it (median true depth "
-            f"< {MIN_TRUE_DEPTH_M} m); too few for a correlation. The map of {rdir.name} "
-            "disagrees with the truth there: see its sfm/accuracy.json and freespace.png"
-        )
-    score = np.array([r["score_deg"] for r in rows])
-    quality = np.array([r["psnr"] for r in rows])
-    rho = spearman(score, quality)
-    covered = np.array([r["coverage"] for r in rows]) >= 0.5
-    lo, hi = bootstrap_interval(score, quality, seed=ecfg.seed)
-    summary = {
-        "round": rdir.name,
-        "candidates": len(rows),
-        "candidates_scored": int(np.isfinite(cands["score_deg"]).sum()),
-        "candidates_examined": len(rows) + len(excluded),
-        "spearman_score_psnr": rho,
-        "spearman_95ci": [lo, hi],
-        "spearman_score_ssim": spearman(score, [r["ssim"] for r in rows]),
-        "spearman_seen_fraction_psnr": spearman([r["seen_fraction"] for r in rows], quality),
-        "spearman_score_psnr_proxy_covered": spearman(score[covered], quality[covered]),
-        "proxy_covered_candidates": int(covered.sum()),
-        "excluded_no_true_view": excluded,
-        "psnr_db": {"median": float(np.median(quality)), "mean": float(np.mean(quality))},
-        "score_deg": {"median": float(np.median(score)), "max": float(np.max(score))},
-        "size": [w, h],
-        "proxy": {
-            "dense": str(inputs.dense_ply),
-            "points": len(proxy),
-            "to_round_frame_scale": s,
-            "shared_photos": n_common,
-        },
-        "sources": len(sources),
-        "seconds": time.perf_counter() - t0,
-        "rows": rows,
-    }
+        raise _too_few_views(rows, excluded, order, rdir)
+    summary = _summary(rows, excluded, cands, rdir, inputs, synth, ecfg, t0)
     out_json = Path(out_json)
     out_json.parent.mkdir(parents=True, exist_ok=True)
     out_json.write_text(json.dumps(summary, indent=1))
     if out_png is not None and ecfg.plots:
         plot_validity(summary, Path(out_png))
+    lo, hi = summary["spearman_95ci"]
     LOG.info(
         "score validity (%s, %d views): Spearman(score, PSNR) = %.2f [%.2f, %.2f]",
-        rdir.name, len(rows), rho, lo, hi,
+        rdir.name, len(rows), summary["spearman_score_psnr"], lo, hi,
     )  # fmt: skip
     return summary
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from scenebot.settings import Settings
 
 
-class LocalizeConfig(BaseModel):
+class LocalizeConfig(Settings):
     """Settings of SIFT extraction, descriptor matching and absolute pose estimation."""
-
-    model_config = ConfigDict(extra="forbid")
 
     method: Literal["dlt", "pycolmap"] = Field(
         "dlt",

@@ -314,17 +314,131 @@ def _sample_indices(rng: np.random.Generator, n: int, batch: int) -> np.ndarray:
     return np.argpartition(rng.random((batch, n)), MIN_SAMPLE - 1, axis=1)[:, :MIN_SAMPLE]
 
 
+def _iterations_needed(inliers: int, n: int, confidence: float) -> int:
+    """RANSAC hypotheses needed to draw one all-inlier sample with ``confidence`` when
+    ``inliers`` of the ``n`` matches are inliers."""
+    w = inliers / n
+    fail = 1.0 - w**MIN_SAMPLE
+    return 0 if fail <= 0 else math.ceil(math.log(1 - confidence) / math.log(max(fail, 1e-12)))
+
+
+def _ransac_camera(
+    x: np.ndarray,
+    X: np.ndarray,
+    cx: float,
+    cy: float,
+    f_init: float | None,
+    thr2: float,
+    confidence: float,
+    max_iterations: int,
+    rng: np.random.Generator,
+    batch: int,
+) -> tuple[int, np.ndarray | None, np.ndarray | None, int]:
+    """RANSAC over batches of DLT camera matrices of 6-match samples.
+
+    Returns:
+        The best plausible hypothesis's inlier count, inlier mask and (3, 4) camera matrix
+        (mask and matrix None when no hypothesis had an inlier), and the hypotheses drawn.
+    """
+    n = len(x)
+    best_count, best_mask, best_P = 0, None, None
+    needed = max_iterations
+    done = 0
+    while done < min(needed, max_iterations):
+        b = min(batch, max_iterations - done)
+        idx = _sample_indices(rng, n, b)
+        P = dlt_batch(x[idx], X[idx])
+        uv, z = project(P, X)
+        err2 = ((uv - x[None]) ** 2).sum(axis=2)
+        mask = (z > 0) & (err2 < thr2) & np.isfinite(err2)
+        counts = mask.sum(axis=1) * plausible_cameras(P, cx, cy, f_init)
+        j = int(np.argmax(counts))
+        done += b
+        if counts[j] > best_count:
+            best_count, best_mask, best_P = int(counts[j]), mask[j], P[j]
+            needed = _iterations_needed(best_count, n, confidence)
+    return best_count, best_mask, best_P, done
+
+
+def _refine_on_inliers(
+    x: np.ndarray,
+    X: np.ndarray,
+    mask: np.ndarray,
+    P_init: np.ndarray,
+    cx: float,
+    cy: float,
+    f_init: float | None,
+    refine_focal: bool,
+    thr2: float,
+    iterations: int,
+) -> DltPose | None:
+    """The pose from RANSAC's best hypothesis (see :func:`ransac_dlt_pose`); None when
+    fewer than 6 inliers remain. ``iterations``: the hypotheses RANSAC drew."""
+    # Re-estimate P from all inliers (if that camera is plausible; matches on one plane make
+    # it degenerate, then the best hypothesis is kept), split P = K [R | T] (eq. 2), refine
+    # f, R, T (eq. 3), re-select the inliers with the refined camera; repeat once.
+    for _ in range(2):
+        if mask.sum() < MIN_SAMPLE:
+            return None
+        P_all = dlt(x[mask], X[mask])
+        if plausible_cameras(P_all[None], cx, cy, f_init)[0]:
+            P_init = P_all
+        K, R, t = decompose_camera_matrix(P_init)
+        f = 0.5 * (K[0, 0] + K[1, 1])
+        if f_init is not None and not refine_focal:
+            f = f_init
+        f, R, t = refine_f_r_t(x[mask], X[mask], f, R, t, cx, cy, refine_focal)
+        P_init = _camera_matrix(f, cx, cy, R, t)
+        uv, z = project(P_init, X)
+        err2 = ((uv - x) ** 2).sum(axis=1)
+        new_mask = (z > 0) & (err2 < thr2)
+        if np.array_equal(new_mask, mask):
+            break
+        mask = new_mask
+    if mask.sum() < MIN_SAMPLE:
+        return None
+    rmse = float(np.sqrt(err2[mask].mean()))
+    return DltPose(R, t, f, mask, iterations, rmse)
+
+
+def _better_of_planar(
+    pose: DltPose,
+    x: np.ndarray,
+    X: np.ndarray,
+    cx: float,
+    cy: float,
+    f_init: float,
+    refine_focal: bool,
+    max_error_px: float,
+    seed: int,
+) -> DltPose:
+    """``pose``, or the dominant plane's pose when that has more inliers (or as many and a
+    lower RMSE)."""
+    # Matches on few, nearly planar surfaces (a wall, a bookcase) leave the DLT poorly
+    # conditioned and its refinement can settle in a local minimum; a second start from
+    # the dominant plane's homography often finds the better one. Keep the better pose.
+    f = pose.focal_px if not refine_focal else f_init
+    alt = planar_pose(x, X, f, cx, cy, max_error_px, 0.999, seed)
+    if alt is not None and (
+        alt.inliers.sum() > pose.inliers.sum()
+        or (alt.inliers.sum() == pose.inliers.sum() and alt.rmse_px < pose.rmse_px)
+    ):
+        return DltPose(alt.R, alt.t, alt.focal_px, alt.inliers, pose.iterations, alt.rmse_px, True)
+    return pose
+
+
 def ransac_dlt_pose(
     x: np.ndarray,
     X: np.ndarray,
     cx: float,
     cy: float,
     f_init: float | None = None,
-    max_error_px: float = 4.0,
-    confidence: float = 0.9999,
-    max_iterations: int = 2000,
+    *,
+    max_error_px: float,
+    confidence: float,
+    max_iterations: int,
     refine_focal: bool = True,
-    seed: int = 0,
+    seed: int,
     batch: int = 64,
 ) -> DltPose | None:
     """RANSAC over DLT camera matrices, RQ decomposition, refinement of f, R, T.
@@ -348,75 +462,23 @@ def ransac_dlt_pose(
     """
     x = np.asarray(x, float)
     X = np.asarray(X, float)
-    n = len(x)
-    if n < MIN_SAMPLE:
+    if len(x) < MIN_SAMPLE:
         return None
     rng = np.random.default_rng(seed)
     thr2 = max_error_px**2
-    best_count, best_mask, best_P = 0, None, None
-    needed = max_iterations
-    done = 0
-    while done < min(needed, max_iterations):
-        b = min(batch, max_iterations - done)
-        idx = _sample_indices(rng, n, b)
-        P = dlt_batch(x[idx], X[idx])
-        uv, z = project(P, X)
-        err2 = ((uv - x[None]) ** 2).sum(axis=2)
-        mask = (z > 0) & (err2 < thr2) & np.isfinite(err2)
-        counts = mask.sum(axis=1) * plausible_cameras(P, cx, cy, f_init)
-        j = int(np.argmax(counts))
-        done += b
-        if counts[j] > best_count:
-            best_count, best_mask, best_P = int(counts[j]), mask[j], P[j]
-            w = best_count / n
-            fail = 1.0 - w**MIN_SAMPLE
-            needed = (
-                0 if fail <= 0 else math.ceil(math.log(1 - confidence) / math.log(max(fail, 1e-12)))
-            )
+    best_count, best_mask, best_P, done = _ransac_camera(
+        x, X, cx, cy, f_init, thr2, confidence, max_iterations, rng, batch
+    )
     if best_mask is None or best_count < MIN_SAMPLE:
         if f_init is None:
             return None
         return planar_pose(x, X, f_init, cx, cy, max_error_px, confidence, seed)
-    # Re-estimate P from all inliers (if that camera is plausible; matches on one plane make
-    # it degenerate, then the best hypothesis is kept), split P = K [R | T] (eq. 2), refine
-    # f, R, T (eq. 3), re-select the inliers with the refined camera; repeat once.
-    mask = best_mask
-    P_init = best_P
-    for _ in range(2):
-        if mask.sum() < MIN_SAMPLE:
-            return None
-        P_all = dlt(x[mask], X[mask])
-        if plausible_cameras(P_all[None], cx, cy, f_init)[0]:
-            P_init = P_all
-        K, R, t = decompose_camera_matrix(P_init)
-        f = 0.5 * (K[0, 0] + K[1, 1])
-        if f_init is not None and not refine_focal:
-            f = f_init
-        f, R, t = refine_f_r_t(x[mask], X[mask], f, R, t, cx, cy, refine_focal)
-        P_init = _camera_matrix(f, cx, cy, R, t)
-        uv, z = project(P_init, X)
-        err2 = ((uv - x) ** 2).sum(axis=1)
-        new_mask = (z > 0) & (err2 < thr2)
-        if np.array_equal(new_mask, mask):
-            break
-        mask = new_mask
-    if mask.sum() < MIN_SAMPLE:
-        return None
-    rmse = float(np.sqrt(err2[mask].mean()))
-    pose = DltPose(R, t, f, mask, done, rmse)
-    if f_init is not None:
-        # Matches on few, nearly planar surfaces (a wall, a bookcase) leave the DLT poorly
-        # conditioned and its refinement can settle in a local minimum; a second start from
-        # the dominant plane's homography often finds the better one. Keep the better pose.
-        alt = planar_pose(
-            x, X, f if not refine_focal else f_init, cx, cy, max_error_px, 0.999, seed
-        )
-        if alt is not None and (
-            alt.inliers.sum() > pose.inliers.sum()
-            or (alt.inliers.sum() == pose.inliers.sum() and alt.rmse_px < pose.rmse_px)
-        ):
-            return DltPose(alt.R, alt.t, alt.focal_px, alt.inliers, done, alt.rmse_px, True)
-    return pose
+    pose = _refine_on_inliers(
+        x, X, best_mask, best_P, cx, cy, f_init, refine_focal, thr2, iterations=done
+    )
+    if pose is None or f_init is None:
+        return pose
+    return _better_of_planar(pose, x, X, cx, cy, f_init, refine_focal, max_error_px, seed)
 
 
 def _dominant_plane(
@@ -452,9 +514,9 @@ def planar_pose(
     f: float,
     cx: float,
     cy: float,
-    max_error_px: float = 4.0,
-    confidence: float = 0.9999,
-    seed: int = 0,
+    max_error_px: float,
+    confidence: float,
+    seed: int,
 ) -> DltPose | None:
     """Pose from matches on one plane with a known focal length (see the module docstring).
 

@@ -47,15 +47,16 @@ def load_gray(image: str | Path | np.ndarray) -> np.ndarray:
 
 
 def extract_sift(
-    gray: np.ndarray, first_octave: int = -1, max_features: int = 8192, num_threads: int = 2
+    gray: np.ndarray, first_octave: int, max_features: int, num_threads: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """pycolmap SIFT (CPU) keypoints and descriptors of a grey image.
 
     Args:
         gray: (H, W) uint8 image.
-        first_octave: -1 (COLMAP default, upsampled) or 0 (faster).
-        max_features: most features kept.
-        num_threads: extraction threads.
+        first_octave: -1 (COLMAP default, upsampled) or 0 (faster)
+            (``localize.sift_first_octave``).
+        max_features: most features kept (``localize.sift_max_features``).
+        num_threads: extraction threads, -1: all cores (``localize.sift_num_threads``).
 
     Returns:
         keypoints (n, 2) float64 pixel coordinates (x right, y down; COLMAP convention: the

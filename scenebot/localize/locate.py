@@ -341,7 +341,7 @@ def make_localizer(
 
     The map and its FLANN index are loaded once (the index is cached at ``cache_file``,
     default ``sfm_dir/point_descriptors.flann``); this is the ``localizer`` argument of
-    :class:`scenebot.follow.PathFollower`.
+    :class:`scenebot.capture.follow.PathFollower`.
     """
     cfg = cfg or LocalizeConfig()
     lmap = LocalizationMap.load(sfm_dir, cfg, cache_file=cache_file)

@@ -71,8 +71,8 @@ def match_to_map(
     query_desc: np.ndarray,
     index: DescriptorIndex,
     desc: MapDescriptors,
-    knn: int = 6,
-    ratio: float = 0.8,
+    knn: int,
+    ratio: float,
 ) -> Matches:
     """Match query descriptors to 3D points (ratio test across distinct points, one-to-one).
 
@@ -80,8 +80,8 @@ def match_to_map(
         query_desc: (Q, 128) uint8 query SIFT descriptors.
         index: the FLANN index over ``desc.descriptors``.
         desc: the map's point descriptors.
-        knn: neighbours fetched per query (>= 2).
-        ratio: Lowe ratio.
+        knn: neighbours fetched per query (>= 2; ``localize.knn``).
+        ratio: Lowe ratio (``localize.ratio``).
     """
     nn_idx, nn_dist = index.knn(query_desc, knn)
     keep, r = ratio_test_distinct_points(nn_idx, nn_dist, desc.point_ids, ratio)

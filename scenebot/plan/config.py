@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from scenebot.settings import Settings
 
 
-class PlanConfig(BaseModel):
+class PlanConfig(Settings):
     """Settings of the navigation grid and the path planner (paper section IV.B)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     n_cells: int = Field(
         100, ge=4, le=4000, description="Grid cells along the larger dimension of the grid."

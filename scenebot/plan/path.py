@@ -78,7 +78,7 @@ class PlannedPath:
 
 
 def plan_path(
-    grid: NavGrid, start_xy: np.ndarray, goal_xy: np.ndarray, simplify_factor: float = 1.1
+    grid: NavGrid, start_xy: np.ndarray, goal_xy: np.ndarray, simplify_factor: float
 ) -> PlannedPath | PlanFailure:
     """A* from ``start_xy`` to ``goal_xy`` on ``grid``, then path simplification.
 
@@ -86,7 +86,8 @@ def plan_path(
         grid: the navigation grid.
         start_xy: (2,) robot position (m, map frame).
         goal_xy: (2,) goal position (m, map frame).
-        simplify_factor: see :func:`scenebot.plan.simplify.simplify_path`.
+        simplify_factor: ``plan.simplify_factor``; see
+            :func:`scenebot.plan.simplify.simplify_path`.
 
     Returns:
         The path, or a :class:`PlanFailure` when the start or goal is outside the grid, the
@@ -159,10 +160,11 @@ class GridPlanner:
 
     Args:
         grid: the navigation grid (copied; the original is not changed).
-        simplify_factor: see :func:`scenebot.plan.simplify.simplify_path`.
+        simplify_factor: ``plan.simplify_factor``; see
+            :func:`scenebot.plan.simplify.simplify_path`.
     """
 
-    def __init__(self, grid: NavGrid, simplify_factor: float = 1.1):
+    def __init__(self, grid: NavGrid, simplify_factor: float):
         self.grid = NavGrid(
             grid.geometry,
             grid.counts.copy(),

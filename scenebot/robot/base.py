@@ -193,8 +193,11 @@ class Camera(abc.ABC):
     """A camera that delivers finished JPEG files."""
 
     @abc.abstractmethod
-    def capture(self, dest: Path, timeout_s: float = 30.0) -> Path:
+    def capture(self, dest: Path, timeout_s: float | None = None) -> Path:
         """Take a photo and store it at ``dest`` (a ``.jpg`` path); return the path.
+
+        ``timeout_s``: how long to wait for the photo (s); None: the backend's configured
+        timeout (``nxt.camera.timeout_s``; the simulator's photo is there at once).
 
         Raises:
             CameraError: no usable photo arrived within ``timeout_s``.

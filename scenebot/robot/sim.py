@@ -143,7 +143,7 @@ class SimCamera(Camera):
     def __init__(self, world: SimWorld):
         self.world = world
 
-    def capture(self, dest: Path, timeout_s: float = 30.0) -> Path:
+    def capture(self, dest: Path, timeout_s: float | None = None) -> Path:
         """Render the photo and store it at ``dest`` (atomically, verified, never over an
         existing file: :func:`scenebot.jpeg.store_photo`, which raises
         :class:`~scenebot.jpeg.PhotoWriteError`)."""

@@ -28,6 +28,7 @@ The start pose is in the living room, between the sofa's coffee table and the do
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -82,66 +83,105 @@ def wallpaper(rng: np.random.Generator, tint, motif, size: int = 512) -> np.ndar
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
-def flat(seed: int = 7) -> SceneMesh:
-    """Generate the two-room flat.
+@dataclass
+class _Materials:
+    """Indices of the flat's fixed materials in the builder."""
 
-    Args:
-        seed: generator seed; the same seed gives the same scene, textures included.
+    carpet: int
+    parquet: int
+    corridor_carpet: int
+    ceiling: int
+    wall_a: int  # living room
+    wall_b: int  # bedroom
+    wall_c: int  # corridor
+    base: int
+    wood: int
+    dark: int
+    steel: int
+    sofa: int
+    bed: int
+    door: int
+    tv: int
+    pot: int
+    leaves: int
+    light: int
+    window: int
 
-    Returns:
-        The scene, with ``start`` set to a free pose in the living room.
-    """
-    rng = np.random.default_rng(seed)
+
+def _material(b: SceneBuilder, name: str, texture: np.ndarray, **kw) -> int:
+    return b.material(Material(name, texture, **kw))
+
+
+def _flat_materials(b: SceneBuilder, rng: np.random.Generator) -> _Materials:
+    """The fixed materials, their textures drawn in this order."""
+    return _Materials(
+        carpet=_material(b, "carpet", tx.carpet(rng, 512)),
+        parquet=_material(b, "parquet", tx.wood(rng, 512, light=True)),
+        corridor_carpet=_material(b, "corridor_carpet", tx.carpet(rng, 512)),
+        ceiling=_material(b, "ceiling", tx.plaster(rng, 256, tint=(236, 236, 232))),
+        wall_a=_material(b, "living_wallpaper", wallpaper(rng, (228, 222, 200), (150, 160, 120))),
+        wall_b=_material(b, "bedroom_wallpaper", wallpaper(rng, (200, 214, 226), (120, 140, 170))),
+        wall_c=_material(b, "corridor_wallpaper", wallpaper(rng, (226, 220, 200), (160, 120, 80))),
+        base=_material(b, "baseboard", tx.metal(rng, 128, tint=(235, 235, 230))),
+        wood=_material(b, "light_wood", tx.wood(rng, 1024, light=True)),
+        dark=_material(b, "dark_wood", tx.wood(rng, 512, light=False)),
+        steel=_material(b, "steel", tx.metal(rng, 256), specular=0.6, shininess=60),
+        sofa=_material(b, "sofa_fabric", tx.fabric(rng)),
+        bed=_material(b, "bed_fabric", tx.fabric(rng)),
+        door=_material(b, "door", tx.door(rng)),
+        tv=_material(b, "tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100),
+        pot=_material(b, "plant_pot", tx.flat((150, 80, 50))),
+        leaves=_material(b, "leaves", wallpaper(rng, (70, 115, 55), (35, 75, 30), 256)),
+        light=_material(b, "ceiling_light", tx.flat((255, 252, 240)), emissive=True),
+        window=_material(b, "window", tx.framed_picture(rng, 512, 384), emissive=True),
+    )
+
+
+# ------------------------------------------------------------------------------- the shell
+def _floors_and_ceiling(b: SceneBuilder, m: _Materials) -> None:
+    """Floors (one per space) and the ceiling."""
     W, D, H = FLAT_W_M, FLAT_D_M, ROOM_HEIGHT_M
     px0, px1 = PARTITION_X
     cy0, cy1 = CORRIDOR_WALL_Y
-    b = SceneBuilder("flat")
+    b.quad([0, 0, 0], [px0, 0, 0], [0, cy0, 0], m.carpet, uv_size=(0.5, 0.5))
+    b.quad([px1, 0, 0], [W - px1, 0, 0], [0, cy0, 0], m.parquet, uv_size=(0.9, 0.9))
+    b.quad([0, cy1, 0], [W, 0, 0], [0, D - cy1, 0], m.corridor_carpet, uv_size=(0.5, 0.5))
+    b.quad([0, 0, H], [0, D, 0], [W, 0, 0], m.ceiling, uv_size=(1.0, 1.0))
 
-    def mat(name, texture, **kw) -> int:
-        return b.material(Material(name, texture, **kw))
 
-    m_carpet = mat("carpet", tx.carpet(rng, 512))
-    m_parquet = mat("parquet", tx.wood(rng, 512, light=True))
-    m_tiles = mat("corridor_carpet", tx.carpet(rng, 512))
-    m_ceiling = mat("ceiling", tx.plaster(rng, 256, tint=(236, 236, 232)))
-    m_wall_a = mat("living_wallpaper", wallpaper(rng, (228, 222, 200), (150, 160, 120)))
-    m_wall_b = mat("bedroom_wallpaper", wallpaper(rng, (200, 214, 226), (120, 140, 170)))
-    m_wall_c = mat("corridor_wallpaper", wallpaper(rng, (226, 220, 200), (160, 120, 80)))
-    m_base = mat("baseboard", tx.metal(rng, 128, tint=(235, 235, 230)))
-    m_wood = mat("light_wood", tx.wood(rng, 1024, light=True))
-    m_dark = mat("dark_wood", tx.wood(rng, 512, light=False))
-    m_steel = mat("steel", tx.metal(rng, 256), specular=0.6, shininess=60)
-    m_sofa = mat("sofa_fabric", tx.fabric(rng))
-    m_bed = mat("bed_fabric", tx.fabric(rng))
-    m_door = mat("door", tx.door(rng))
-    m_tv = mat("tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100)
-    m_pot = mat("plant_pot", tx.flat((150, 80, 50)))
-    m_leaves = mat("leaves", wallpaper(rng, (70, 115, 55), (35, 75, 30), 256))
-    m_light = mat("ceiling_light", tx.flat((255, 252, 240)), emissive=True)
-    m_window = mat("window", tx.framed_picture(rng, 512, 384), emissive=True)
+def _papered_wall(b: SceneBuilder, o, u, paper: int, base: int) -> None:
+    """An outer wall from ``o`` along ``u`` (seen from inside: u to the right), baseboard."""
+    b.quad(o, u, [0, 0, ROOM_HEIGHT_M], paper, uv_size=(1.0, 1.0))
+    u = np.asarray(u, float)
+    n = np.array([-u[1], u[0], 0.0]) / np.linalg.norm(u)
+    b.quad(np.asarray(o, float) + 0.012 * n, u, [0, 0, 0.08], base, uv_size=(0.5, 0.08))
 
-    # Floors (one per space) and the ceiling.
-    b.quad([0, 0, 0], [px0, 0, 0], [0, cy0, 0], m_carpet, uv_size=(0.5, 0.5))
-    b.quad([px1, 0, 0], [W - px1, 0, 0], [0, cy0, 0], m_parquet, uv_size=(0.9, 0.9))
-    b.quad([0, cy1, 0], [W, 0, 0], [0, D - cy1, 0], m_tiles, uv_size=(0.5, 0.5))
-    b.quad([0, 0, H], [0, D, 0], [W, 0, 0], m_ceiling, uv_size=(1.0, 1.0))
 
-    # Outer walls, painted per space they face, with baseboards.
-    def wall(o, u, m):
-        b.quad(o, u, [0, 0, H], m, uv_size=(1.0, 1.0))
-        u = np.asarray(u, float)
-        n = np.array([-u[1], u[0], 0.0]) / np.linalg.norm(u)
-        b.quad(np.asarray(o, float) + 0.012 * n, u, [0, 0, 0.08], m_base, uv_size=(0.5, 0.08))
+def _outer_walls(b: SceneBuilder, m: _Materials) -> None:
+    """Outer walls, papered per space they face, with baseboards."""
+    W, D = FLAT_W_M, FLAT_D_M
+    px0, px1 = PARTITION_X
+    cy0, cy1 = CORRIDOR_WALL_Y
+    _papered_wall(b, [0, 0, 0], [px0, 0, 0], m.wall_a, m.base)  # living room, south
+    _papered_wall(b, [px1, 0, 0], [W - px1, 0, 0], m.wall_b, m.base)  # bedroom, south
+    _papered_wall(b, [W, 0, 0], [0, cy0, 0], m.wall_b, m.base)  # bedroom, east
+    _papered_wall(b, [W, cy1, 0], [0, D - cy1, 0], m.wall_c, m.base)  # corridor, east end
+    _papered_wall(b, [W, D, 0], [-W, 0, 0], m.wall_c, m.base)  # corridor, north
+    _papered_wall(b, [0, D, 0], [0, cy1 - D, 0], m.wall_c, m.base)  # corridor, west end
+    _papered_wall(b, [0, cy0, 0], [0, -cy0, 0], m.wall_a, m.base)  # living room, west
 
-    wall([0, 0, 0], [px0, 0, 0], m_wall_a)  # living room, south
-    wall([px1, 0, 0], [W - px1, 0, 0], m_wall_b)  # bedroom, south
-    wall([W, 0, 0], [0, cy0, 0], m_wall_b)  # bedroom, east
-    wall([W, cy1, 0], [0, D - cy1, 0], m_wall_c)  # corridor, east end
-    wall([W, D, 0], [-W, 0, 0], m_wall_c)  # corridor, north
-    wall([0, D, 0], [0, cy1 - D, 0], m_wall_c)  # corridor, west end
-    wall([0, cy0, 0], [0, -cy0, 0], m_wall_a)  # living room, west
 
-    # Interior walls: solid boxes with doorway gaps and lintels above the doorways.
+def _interior_walls(
+    b: SceneBuilder, rng: np.random.Generator, m: _Materials
+) -> list[tuple[float, float]]:
+    """Interior walls: solid boxes with doorway gaps, lintels, thresholds and open doors.
+
+    Returns:
+        The doorways' x extents along the corridor wall: living room's, then bedroom's.
+    """
+    W, H = FLAT_W_M, ROOM_HEIGHT_M
+    px0, px1 = PARTITION_X
+    cy0, cy1 = CORRIDOR_WALL_Y
     door_a = float(np.round(rng.uniform(1.3, 2.2), 2))  # living-room doorway starts here (x)
     door_b = float(np.round(rng.uniform(5.0, 5.9), 2))  # bedroom doorway
     gaps = [(door_a, door_a + DOOR_WIDTH_M), (door_b, door_b + DOOR_WIDTH_M)]
@@ -149,30 +189,45 @@ def flat(seed: int = 7) -> SceneMesh:
     for k in (0, 2, 4, 6):
         x0, x1 = xs[k], xs[k + 1]
         if x1 - x0 > 1e-6:
-            m = m_wall_a if x1 <= px0 + 1e-6 else (m_wall_b if x0 >= px0 else m_wall_a)
-            b.box([x0, cy0, 0], [x1, cy1, H], {"yneg": m, "ypos": m_wall_c, "side": m},
+            paper = m.wall_a if x1 <= px0 + 1e-6 else (m.wall_b if x0 >= px0 else m.wall_a)
+            b.box([x0, cy0, 0], [x1, cy1, H], {"yneg": paper, "ypos": m.wall_c, "side": paper},
                   (1.0, 1.0), skip=("bottom", "top"))  # fmt: skip
-    b.box([px0, cy0, 0], [px1, cy1, H], m_wall_a, (1.0, 1.0), skip=("bottom", "top"))
+    b.box([px0, cy0, 0], [px1, cy1, H], m.wall_a, (1.0, 1.0), skip=("bottom", "top"))
     for g0, g1 in gaps:
-        b.box([g0, cy0, LINTEL_Z_M], [g1, cy1, H], m_wall_c, (1.0, 1.0), skip=("top",))
-    b.box([px0, 0, 0], [px1, cy0, H], {"xneg": m_wall_a, "xpos": m_wall_b, "side": m_wall_a},
+        b.box([g0, cy0, LINTEL_Z_M], [g1, cy1, H], m.wall_c, (1.0, 1.0), skip=("top",))
+    b.box([px0, 0, 0], [px1, cy0, H], {"xneg": m.wall_a, "xpos": m.wall_b, "side": m.wall_a},
           (1.0, 1.0), skip=("bottom", "top"))  # fmt: skip
     for g0, g1 in gaps:  # thresholds: floor under the doorways
-        b.quad([g0, cy0, 0], [g1 - g0, 0, 0], [0, cy1 - cy0, 0], m_parquet, uv_size=(0.9, 0.9))
+        b.quad([g0, cy0, 0], [g1 - g0, 0, 0], [0, cy1 - cy0, 0], m.parquet, uv_size=(0.9, 0.9))
     # Door leaves standing open into each room, hinged at the doorway's west jamb.
     for g0, _ in gaps:
-        b.box([g0 + 0.02, cy0 - 0.84, 0.0], [g0 + 0.06, cy0, 2.0], m_door, (0.84, 2.0))
+        b.box([g0 + 0.02, cy0 - 0.84, 0.0], [g0 + 0.06, cy0, 2.0], m.door, (0.84, 2.0))
+    return gaps
 
-    # Lights: one per room, two in the corridor.
+
+def _lights(b: SceneBuilder, m: _Materials) -> None:
+    """Ceiling lights: one per room, two in the corridor."""
+    W, D, H = FLAT_W_M, FLAT_D_M, ROOM_HEIGHT_M
+    px0, px1 = PARTITION_X
+    cy0, cy1 = CORRIDOR_WALL_Y
     for lx, ly in ((px0 / 2, cy0 / 2), ((px1 + W) / 2, cy0 / 2), (W / 4, (cy1 + D) / 2),
                    (3 * W / 4, (cy1 + D) / 2)):  # fmt: skip
-        b.quad([lx - 0.25, ly - 0.25, H - 0.005], [0, 0.5, 0], [0.5, 0, 0], m_light)
+        b.quad([lx - 0.25, ly - 0.25, H - 0.005], [0, 0.5, 0], [0.5, 0, 0], m.light)
         b.light([lx, ly, H - 0.1])
 
-    # Windows on the outer walls of both rooms (seen from inside: u runs right-to-left).
-    b.quad([0.01, 1.4, 0.9], [0, 1.1, 0], [0, 0, 1.1], m_window)  # living room, west wall
-    b.quad([W - 0.01, 3.3, 0.9], [0, -1.2, 0], [0, 0, 1.1], m_window)  # bedroom, east wall
-    # Posters and pictures: the corridor walls and the rooms.
+
+def _windows(b: SceneBuilder, m: _Materials) -> None:
+    """Windows on the outer walls of both rooms (seen from inside: u runs right-to-left)."""
+    W = FLAT_W_M
+    b.quad([0.01, 1.4, 0.9], [0, 1.1, 0], [0, 0, 1.1], m.window)  # living room, west wall
+    b.quad([W - 0.01, 3.3, 0.9], [0, -1.2, 0], [0, 0, 1.1], m.window)  # bedroom, east wall
+
+
+def _pictures(b: SceneBuilder, rng: np.random.Generator) -> None:
+    """Posters and pictures: the corridor walls and the rooms, at fixed spots."""
+    W, D = FLAT_W_M, FLAT_D_M
+    px0, px1 = PARTITION_X
+    cy0, cy1 = CORRIDOR_WALL_Y
     hi, lo = (1.0, 1.3), (0.4, 0.9)  # bottom heights: above the corridor's cabinets
     spots = [((0.6, D), (1, 0), (0, -1), hi), ((3.0, D), (1, 0), (0, -1), hi),
              ((5.4, D), (1, 0), (0, -1), hi), ((W - 0.05, cy1), (-1, 0), (0, 1), hi),
@@ -186,7 +241,7 @@ def flat(seed: int = 7) -> SceneMesh:
         w = float(rng.uniform(0.45, 0.7))
         h = w * (1.4 if is_poster else 0.75)
         tex = tx.poster(rng) if is_poster else tx.framed_picture(rng)
-        m = mat(f"{'poster' if is_poster else 'picture'}_{k}", tex)
+        m = _material(b, f"{'poster' if is_poster else 'picture'}_{k}", tex)
         s = float(rng.uniform(0.05, 0.2))
         pp = np.array([p0[0] + s * u[0], p0[1] + s * u[1], float(rng.uniform(*zr))])
         pp += 0.01 * np.r_[n, 0]
@@ -195,97 +250,198 @@ def flat(seed: int = 7) -> SceneMesh:
             pp, uu = pp + uu, -uu
         b.quad(pp, uu, [0, 0, h], m)
 
-    # ------------------------------------------------------------------ living room furniture
-    keep = [(door_a - 0.2, cy0 - 1.0, door_a + DOOR_WIDTH_M + 0.2, cy0)]  # doorway approach
-    layout = _Layout(keep)
+
+# ------------------------------------------------------------------------ living room furniture
+def _sofa(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> float:
+    """A sofa against the south wall. Returns its west end (x, m)."""
     sx0 = float(rng.uniform(0.4, 0.9))
-    b.box([sx0, 0.05, 0], [sx0 + 2.0, 0.95, 0.42], m_sofa, (0.5, 0.5))  # seat
-    b.box([sx0, 0.05, 0.42], [sx0 + 2.0, 0.3, 0.85], m_sofa, (0.5, 0.5))  # back
+    b.box([sx0, 0.05, 0], [sx0 + 2.0, 0.95, 0.42], m.sofa, (0.5, 0.5))  # seat
+    b.box([sx0, 0.05, 0.42], [sx0 + 2.0, 0.3, 0.85], m.sofa, (0.5, 0.5))  # back
     for ax in (sx0, sx0 + 1.82):
-        b.box([ax, 0.3, 0.42], [ax + 0.18, 0.95, 0.62], m_sofa, (0.5, 0.5))  # arms
+        b.box([ax, 0.3, 0.42], [ax + 0.18, 0.95, 0.62], m.sofa, (0.5, 0.5))  # arms
     layout.add(sx0, 0.05, sx0 + 2.0, 0.95)
-    tx0 = sx0 + 0.5
+    return sx0
+
+
+def _coffee_table(b: SceneBuilder, m: _Materials, layout: _Layout, tx0: float) -> None:
+    """A coffee table on steel legs in front of the sofa, its west end at ``tx0``."""
     top = 0.42
-    b.box([tx0, 1.35, top - 0.03], [tx0 + 1.0, 1.85, top], {"top": m_wood, "side": m_dark},
+    b.box([tx0, 1.35, top - 0.03], [tx0 + 1.0, 1.85, top], {"top": m.wood, "side": m.dark},
           (0.8, 0.8))  # fmt: skip
     for lx, ly in ((tx0, 1.35), (tx0 + 0.96, 1.35), (tx0, 1.81), (tx0 + 0.96, 1.81)):
-        b.box([lx, ly, 0], [lx + 0.04, ly + 0.04, top - 0.03], m_steel, (0.1, 0.5))
+        b.box([lx, ly, 0], [lx + 0.04, ly + 0.04, top - 0.03], m.steel, (0.1, 0.5))
     layout.add(tx0, 1.35, tx0 + 1.0, 1.85)
-    # bookcase against the west wall, facing east
+
+
+def _bookcase(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+    """A bookcase against the west wall, facing east, five shelves of books."""
     by0 = float(rng.uniform(0.9, 1.3))
-    b.box([0.02, by0, 0], [0.38, by0 + 1.0, 1.9], m_dark, (0.5, 0.5))
+    b.box([0.02, by0, 0], [0.38, by0 + 1.0, 1.9], m.dark, (0.5, 0.5))
     for k in range(5):
         z0 = 0.05 + k * 1.8 / 5
-        bk = mat(f"books_{k}", tx.books(rng))
+        bk = _material(b, f"books_{k}", tx.books(rng))
         b.quad([0.384, by0 + 0.02, z0], [0, 0.96, 0], [0, 0, 1.8 / 5 - 0.03], bk)
     layout.add(0.02, by0, 0.38, by0 + 1.0)
-    # TV stand and TV against the partition wall, facing west
+
+
+def _tv(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+    """A TV stand and TV against the partition wall, facing west."""
+    px0 = PARTITION_X[0]
     ty0 = float(rng.uniform(0.8, 1.4))
-    b.box([px0 - 0.45, ty0, 0], [px0 - 0.02, ty0 + 1.3, 0.5], m_wood, (0.6, 0.6))
-    b.box([px0 - 0.2, ty0 + 0.1, 0.5], [px0 - 0.12, ty0 + 1.2, 1.15], m_tv, None)
+    b.box([px0 - 0.45, ty0, 0], [px0 - 0.02, ty0 + 1.3, 0.5], m.wood, (0.6, 0.6))
+    b.box([px0 - 0.2, ty0 + 0.1, 0.5], [px0 - 0.12, ty0 + 1.2, 1.15], m.tv, None)
     layout.add(px0 - 0.45, ty0, px0 - 0.02, ty0 + 1.3)
-    # a plant in the south-east corner
-    b.prism((px0 - 0.3, 0.3), 0.18, 0.0, 0.4, 10, m_pot)
-    b.prism((px0 - 0.3, 0.3), 0.3, 0.4, 1.2, 8, m_leaves)
+
+
+def _plant(b: SceneBuilder, m: _Materials, layout: _Layout) -> None:
+    """A potted plant in the living room's south-east corner."""
+    px0 = PARTITION_X[0]
+    b.prism((px0 - 0.3, 0.3), 0.18, 0.0, 0.4, 10, m.pot)
+    b.prism((px0 - 0.3, 0.3), 0.3, 0.4, 1.2, 8, m.leaves)
     layout.add(px0 - 0.6, 0.0, px0, 0.6)
 
-    # --------------------------------------------------------------------- bedroom furniture
-    blayout = _Layout([(door_b - 0.2, cy0 - 1.0, door_b + DOOR_WIDTH_M + 0.2, cy0)])
+
+def _living_room(
+    b: SceneBuilder, rng: np.random.Generator, m: _Materials, door_a: float
+) -> tuple[_Layout, float]:
+    """The living room's furniture, the doorway approach kept free.
+
+    Returns:
+        Its layout and the coffee table's west end (x, m; the start pose is east of it).
+    """
+    cy0 = CORRIDOR_WALL_Y[0]
+    layout = _Layout([(door_a - 0.2, cy0 - 1.0, door_a + DOOR_WIDTH_M + 0.2, cy0)])
+    tx0 = _sofa(b, rng, m, layout) + 0.5
+    _coffee_table(b, m, layout, tx0)
+    _bookcase(b, rng, m, layout)
+    _tv(b, rng, m, layout)
+    _plant(b, m, layout)
+    return layout, tx0
+
+
+# ---------------------------------------------------------------------------- bedroom furniture
+def _bed(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+    """A bed with a headboard against the east wall and a nightstand beside it."""
+    W = FLAT_W_M
     bedy = float(rng.uniform(0.3, 0.8))
-    b.box([W - 2.05, bedy, 0], [W - 0.05, bedy + 1.6, 0.55], m_bed, (0.8, 0.8))
-    b.box([W - 0.12, bedy, 0.55], [W - 0.02, bedy + 1.6, 1.1], m_dark, (0.5, 0.5))
-    blayout.add(W - 2.05, bedy, W - 0.02, bedy + 1.6)
-    b.box([W - 0.5, bedy + 1.7, 0], [W - 0.05, bedy + 2.1, 0.5], m_wood, (0.4, 0.4))  # nightstand
-    blayout.add(W - 0.5, bedy + 1.7, W - 0.05, bedy + 2.1)
-    wx0 = px1 + float(rng.uniform(0.05, 0.4))
-    b.box([wx0, 0.02, 0], [wx0 + 1.2, 0.62, 2.0], {"ypos": m_wood, "side": m_dark}, (0.6, 1.0))
-    blayout.add(wx0, 0.02, wx0 + 1.2, 0.62)
-    # desk with a chair against the partition, north of the wardrobe
+    b.box([W - 2.05, bedy, 0], [W - 0.05, bedy + 1.6, 0.55], m.bed, (0.8, 0.8))
+    b.box([W - 0.12, bedy, 0.55], [W - 0.02, bedy + 1.6, 1.1], m.dark, (0.5, 0.5))
+    layout.add(W - 2.05, bedy, W - 0.02, bedy + 1.6)
+    b.box([W - 0.5, bedy + 1.7, 0], [W - 0.05, bedy + 2.1, 0.5], m.wood, (0.4, 0.4))  # nightstand
+    layout.add(W - 0.5, bedy + 1.7, W - 0.05, bedy + 2.1)
+
+
+def _wardrobe(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+    """A wardrobe against the south wall, next to the partition."""
+    wx0 = PARTITION_X[1] + float(rng.uniform(0.05, 0.4))
+    b.box([wx0, 0.02, 0], [wx0 + 1.2, 0.62, 2.0], {"ypos": m.wood, "side": m.dark}, (0.6, 1.0))
+    layout.add(wx0, 0.02, wx0 + 1.2, 0.62)
+
+
+def _desk(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> float:
+    """A desk on steel legs with books on it, against the partition north of the wardrobe.
+
+    Returns:
+        Its south end (y, m).
+    """
+    px1 = PARTITION_X[1]
     dy0 = float(rng.uniform(1.6, 2.1))
     dtop = 0.74
-    desk_mats = {"top": m_wood, "side": m_dark}
+    desk_mats = {"top": m.wood, "side": m.dark}
     b.box([px1 + 0.02, dy0, dtop - 0.03], [px1 + 0.7, dy0 + 1.2, dtop], desk_mats, (0.8, 0.8))
     for lx, ly in ((px1 + 0.02, dy0), (px1 + 0.66, dy0), (px1 + 0.02, dy0 + 1.16),
                    (px1 + 0.66, dy0 + 1.16)):  # fmt: skip
-        b.box([lx, ly, 0], [lx + 0.04, ly + 0.04, dtop - 0.03], m_steel, (0.1, 0.5))
-    bk = mat("desk_books", tx.books(rng, 512, 128))
+        b.box([lx, ly, 0], [lx + 0.04, ly + 0.04, dtop - 0.03], m.steel, (0.1, 0.5))
+    bk = _material(b, "desk_books", tx.books(rng, 512, 128))
     b.box([px1 + 0.1, dy0 + 0.8, dtop], [px1 + 0.4, dy0 + 1.1, dtop + 0.14], bk, None)
-    blayout.add(px1 + 0.02, dy0, px1 + 0.7, dy0 + 1.2)
-    cx0 = px1 + 0.85
-    cy = dy0 + 0.35
-    b.box([cx0, cy, 0.42], [cx0 + 0.46, cy + 0.46, 0.48], m_sofa, (0.46, 0.46))
-    b.box([cx0 + 0.4, cy, 0.48], [cx0 + 0.46, cy + 0.46, 0.92], m_sofa, (0.46, 0.46))
-    for lx, ly in ((cx0, cy), (cx0 + 0.43, cy), (cx0, cy + 0.43), (cx0 + 0.43, cy + 0.43)):
-        b.box([lx, ly, 0], [lx + 0.03, ly + 0.03, 0.42], m_steel, (0.1, 0.5))
-    blayout.add(cx0, cy, cx0 + 0.46, cy + 0.46)
+    layout.add(px1 + 0.02, dy0, px1 + 0.7, dy0 + 1.2)
+    return dy0
 
-    # ---------------------------------------------------------------------- corridor and boxes
+
+def _desk_chair(b: SceneBuilder, m: _Materials, layout: _Layout, dy0: float) -> None:
+    """A chair on steel legs east of the desk whose south end is at ``dy0``."""
+    cx0 = PARTITION_X[1] + 0.85
+    cy = dy0 + 0.35
+    b.box([cx0, cy, 0.42], [cx0 + 0.46, cy + 0.46, 0.48], m.sofa, (0.46, 0.46))
+    b.box([cx0 + 0.4, cy, 0.48], [cx0 + 0.46, cy + 0.46, 0.92], m.sofa, (0.46, 0.46))
+    for lx, ly in ((cx0, cy), (cx0 + 0.43, cy), (cx0, cy + 0.43), (cx0 + 0.43, cy + 0.43)):
+        b.box([lx, ly, 0], [lx + 0.03, ly + 0.03, 0.42], m.steel, (0.1, 0.5))
+    layout.add(cx0, cy, cx0 + 0.46, cy + 0.46)
+
+
+def _bedroom(b: SceneBuilder, rng: np.random.Generator, m: _Materials, door_b: float) -> _Layout:
+    """The bedroom's furniture, the doorway approach kept free. Returns its layout."""
+    cy0 = CORRIDOR_WALL_Y[0]
+    layout = _Layout([(door_b - 0.2, cy0 - 1.0, door_b + DOOR_WIDTH_M + 0.2, cy0)])
+    _bed(b, rng, m, layout)
+    _wardrobe(b, rng, m, layout)
+    dy0 = _desk(b, rng, m, layout)
+    _desk_chair(b, m, layout, dy0)
+    return layout
+
+
+# --------------------------------------------------------------------------- corridor and boxes
+def _corridor(b: SceneBuilder, rng: np.random.Generator, m: _Materials) -> None:
+    """Two cabinets against the corridor's north wall, a vase on the second."""
+    D = FLAT_D_M
     kx0 = float(rng.uniform(0.3, 1.0))
-    b.box([kx0, D - 0.36, 0], [kx0 + 1.1, D - 0.02, 0.9], {"yneg": m_wood, "side": m_dark},
+    b.box([kx0, D - 0.36, 0], [kx0 + 1.1, D - 0.02, 0.9], {"yneg": m.wood, "side": m.dark},
           (0.55, 0.45))  # fmt: skip
     sx = float(rng.uniform(4.6, 6.0))
-    b.box([sx, D - 0.4, 0], [sx + 1.3, D - 0.02, 0.8], {"yneg": m_dark, "side": m_wood},
+    b.box([sx, D - 0.4, 0], [sx + 1.3, D - 0.02, 0.8], {"yneg": m.dark, "side": m.wood},
           (0.65, 0.4))  # fmt: skip
-    vase = mat("vase", tx.flat((60, 90, 140)), specular=0.5)
+    vase = _material(b, "vase", tx.flat((60, 90, 140)), specular=0.5)
     b.prism((sx + 0.3, D - 0.21), 0.08, 0.8, 1.1, 10, vase)
 
-    def boxes(lay: _Layout, x_rng, y_rng, n):
-        placed = 0
-        for _ in range(200):
-            if placed >= n:
-                return
-            sx_, sy_ = rng.uniform(0.3, 0.55, 2)
-            sz = float(rng.uniform(0.25, 0.5))
-            x0, y0 = rng.uniform(x_rng[0], x_rng[1] - sx_), rng.uniform(y_rng[0], y_rng[1] - sy_)
-            if lay.fits(x0, y0, x0 + sx_, y0 + sy_, gap=0.55):
-                m = mat(f"cardboard_{len(b.materials)}", tx.cardboard(rng))
-                b.box([x0, y0, 0], [x0 + sx_, y0 + sy_, sz], m, None)
-                lay.add(x0, y0, x0 + sx_, y0 + sy_)
-                placed += 1
+
+def _boxes(b: SceneBuilder, rng: np.random.Generator, lay: _Layout, x_rng, y_rng, n: int) -> None:
+    """Up to ``n`` cardboard boxes at random free spots of ``x_rng`` x ``y_rng`` (200 tries)."""
+    placed = 0
+    for _ in range(200):
+        if placed >= n:
+            return
+        sx_, sy_ = rng.uniform(0.3, 0.55, 2)
+        sz = float(rng.uniform(0.25, 0.5))
+        x0, y0 = rng.uniform(x_rng[0], x_rng[1] - sx_), rng.uniform(y_rng[0], y_rng[1] - sy_)
+        if lay.fits(x0, y0, x0 + sx_, y0 + sy_, gap=0.55):
+            m = _material(b, f"cardboard_{len(b.materials)}", tx.cardboard(rng))
+            b.box([x0, y0, 0], [x0 + sx_, y0 + sy_, sz], m, None)
+            lay.add(x0, y0, x0 + sx_, y0 + sy_)
+            placed += 1
+
+
+def flat(seed: int) -> SceneMesh:
+    """Generate the two-room flat.
+
+    The generator draws every random number from one generator in a fixed order: the steps
+    below run in that order, and reordering them changes the scene of every seed.
+
+    Args:
+        seed: generator seed (``world.seed``); the same seed gives the same scene, textures
+            included.
+
+    Returns:
+        The scene, with ``start`` set to a free pose in the living room.
+    """
+    rng = np.random.default_rng(seed)
+    W = FLAT_W_M
+    px0, px1 = PARTITION_X
+    cy0 = CORRIDOR_WALL_Y[0]
+    b = SceneBuilder("flat")
+    m = _flat_materials(b, rng)
+    _floors_and_ceiling(b, m)
+    _outer_walls(b, m)
+    (door_a, _), (door_b, _) = _interior_walls(b, rng, m)
+    _lights(b, m)
+    _windows(b, m)
+    _pictures(b, rng)
+    living, tx0 = _living_room(b, rng, m, door_a)
+    bedroom = _bedroom(b, rng, m, door_b)
+    _corridor(b, rng, m)
 
     start_xy = (tx0 + 1.5, 2.5)
-    layout.add(start_xy[0] - 0.5, start_xy[1] - 0.5, start_xy[0] + 0.5, start_xy[1] + 0.5)
-    boxes(layout, (0.05, px0 - 0.05), (0.05, cy0 - 0.05), 2)
-    boxes(blayout, (px1 + 0.05, W - 0.05), (0.05, cy0 - 0.05), 2)
+    living.add(start_xy[0] - 0.5, start_xy[1] - 0.5, start_xy[0] + 0.5, start_xy[1] + 0.5)
+    _boxes(b, rng, living, (0.05, px0 - 0.05), (0.05, cy0 - 0.05), 2)
+    _boxes(b, rng, bedroom, (px1 + 0.05, W - 0.05), (0.05, cy0 - 0.05), 2)
     theta = float(rng.uniform(0, 2 * math.pi))
     return b.build(floor_z=0.0, start=Pose2D(start_xy[0], start_xy[1], theta))

@@ -312,92 +312,155 @@ def raster_triangle(
 
     A triangle wholly beyond the near plane is rasterized with screen-space edge functions
     (pixel centres inside or on an edge; depth from the perspective-correct interpolation of
-    1/z); one that crosses the near plane is clipped by ray casting every pixel of its clipped
-    screen bounding box (Moller-Trumbore).
+    1/z, :func:`raster_triangle_beyond`); one that crosses the near plane is clipped by ray
+    casting every pixel of its clipped screen bounding box (Moller-Trumbore,
+    :func:`raster_triangle_crossing`).
     """
+    if ti.min(a.z, bb.z, c.z) > near:
+        raster_triangle_beyond(a, bb, c, b, fx, fy, cx, cy, depth, atomic, inverse)
+    elif ti.max(a.z, bb.z, c.z) > near:
+        raster_triangle_crossing(a, bb, c, b, fx, fy, cx, cy, depth, near, atomic, inverse)
+
+
+@ti.func
+def write_depth(
+    depth: ti.template(), b: ti.i32, j: ti.i32, i: ti.i32, z: ti.f32, atomic: ti.template(),
+    inverse: ti.template(),
+):  # fmt: skip
+    """Keep the nearer of pixel (j, i)'s depth and ``z`` in view ``b``'s z-buffer (atomic:
+    other threads may write it too; inverse: the buffer holds the largest 1 / z)."""
+    if ti.static(atomic):
+        ti.atomic_min(depth[b, j, i], z)
+    elif ti.static(inverse):
+        depth[b, j, i] = ti.max(depth[b, j, i], 1.0 / z)
+    else:
+        depth[b, j, i] = ti.min(depth[b, j, i], z)
+
+
+@ti.func
+def raster_triangle_beyond(
+    a: ti.template(),
+    bb: ti.template(),
+    c: ti.template(),
+    b: ti.i32,
+    fx: ti.f32,
+    fy: ti.f32,
+    cx: ti.f32,
+    cy: ti.f32,
+    depth: ti.template(),
+    atomic: ti.template(),
+    inverse: ti.template(),
+):
+    """:func:`raster_triangle` for a triangle wholly beyond the near plane: screen-space
+    edge functions, depth from the perspective-correct interpolation of 1/z."""
     H = depth.shape[1]
     W = depth.shape[2]
-    if ti.min(a.z, bb.z, c.z) > near:
-        u0, v0 = fx * a.x / a.z + cx, fy * a.y / a.z + cy
-        u1, v1 = fx * bb.x / bb.z + cx, fy * bb.y / bb.z + cy
-        u2, v2 = fx * c.x / c.z + cx, fy * c.y / c.z + cy
-        area = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
-        if ti.abs(area) > 1e-12:
-            inv_area = 1.0 / area
-            ja = ti.max(0, ti.cast(ti.ceil(ti.min(v0, v1, v2) - 0.5), ti.i32))
-            jb = ti.min(H - 1, ti.cast(ti.floor(ti.max(v0, v1, v2) - 0.5), ti.i32))
-            ia = ti.max(0, ti.cast(ti.ceil(ti.min(u0, u1, u2) - 0.5), ti.i32))
-            ib = ti.min(W - 1, ti.cast(ti.floor(ti.max(u0, u1, u2) - 0.5), ti.i32))
-            iz0, iz1, iz2 = 1.0 / a.z, 1.0 / bb.z, 1.0 / c.z
-            eps = -1e-5
-            for j in range(ja, jb + 1):
-                pv = j + 0.5
-                for i in range(ia, ib + 1):
-                    pu = i + 0.5
-                    # barycentric weights of the pixel centre
-                    w0 = ((u1 - pu) * (v2 - pv) - (u2 - pu) * (v1 - pv)) * inv_area
-                    w1 = ((u2 - pu) * (v0 - pv) - (u0 - pu) * (v2 - pv)) * inv_area
-                    w2 = 1.0 - w0 - w1
-                    if w0 >= eps and w1 >= eps and w2 >= eps:
-                        z = 1.0 / (w0 * iz0 + w1 * iz1 + w2 * iz2)
-                        if ti.static(atomic):
-                            ti.atomic_min(depth[b, j, i], z)
-                        elif ti.static(inverse):
-                            depth[b, j, i] = ti.max(depth[b, j, i], 1.0 / z)
-                        else:
-                            depth[b, j, i] = ti.min(depth[b, j, i], z)
-    elif ti.max(a.z, bb.z, c.z) > near:
-        umin, umax, vmin, vmax = FAR, -FAR, FAR, -FAR
-        # screen bounds of the triangle clipped at z = near: projected front vertices
-        # and the points where edges cross the near plane
-        for e in ti.static(range(3)):
-            p = a
-            q = bb
-            if ti.static(e == 1):
-                p = bb
-                q = c
-            if ti.static(e == 2):
-                p = c
-                q = a
-            if p.z >= near:
-                umin = ti.min(umin, fx * p.x / p.z + cx)
-                umax = ti.max(umax, fx * p.x / p.z + cx)
-                vmin = ti.min(vmin, fy * p.y / p.z + cy)
-                vmax = ti.max(vmax, fy * p.y / p.z + cy)
-            if (p.z - near) * (q.z - near) < 0:
-                s = (near - p.z) / (q.z - p.z)
-                x = p + s * (q - p)
-                umin = ti.min(umin, fx * x.x / near + cx)
-                umax = ti.max(umax, fx * x.x / near + cx)
-                vmin = ti.min(vmin, fy * x.y / near + cy)
-                vmax = ti.max(vmax, fy * x.y / near + cy)
-        ja = ti.max(0, ti.cast(ti.ceil(ti.max(vmin, -1.0) - 0.5), ti.i32))
-        jb = ti.min(H - 1, ti.cast(ti.floor(ti.min(vmax, H + 1.0) - 0.5), ti.i32))
-        ia = ti.max(0, ti.cast(ti.ceil(ti.max(umin, -1.0) - 0.5), ti.i32))
-        ib = ti.min(W - 1, ti.cast(ti.floor(ti.min(umax, W + 1.0) - 0.5), ti.i32))
-        e1 = bb - a
-        e2 = c - a
-        tv = -a
-        qv = tv.cross(e1)
-        tq = e2.dot(qv)
+    u0, v0 = fx * a.x / a.z + cx, fy * a.y / a.z + cy
+    u1, v1 = fx * bb.x / bb.z + cx, fy * bb.y / bb.z + cy
+    u2, v2 = fx * c.x / c.z + cx, fy * c.y / c.z + cy
+    area = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
+    if ti.abs(area) > 1e-12:
+        inv_area = 1.0 / area
+        ja = ti.max(0, ti.cast(ti.ceil(ti.min(v0, v1, v2) - 0.5), ti.i32))
+        jb = ti.min(H - 1, ti.cast(ti.floor(ti.max(v0, v1, v2) - 0.5), ti.i32))
+        ia = ti.max(0, ti.cast(ti.ceil(ti.min(u0, u1, u2) - 0.5), ti.i32))
+        ib = ti.min(W - 1, ti.cast(ti.floor(ti.max(u0, u1, u2) - 0.5), ti.i32))
+        iz0, iz1, iz2 = 1.0 / a.z, 1.0 / bb.z, 1.0 / c.z
+        eps = -1e-5
         for j in range(ja, jb + 1):
-            dy = (j + 0.5 - cy) / fy
+            pv = j + 0.5
             for i in range(ia, ib + 1):
-                d = ti.Vector([(i + 0.5 - cx) / fx, dy, 1.0])
-                pv = d.cross(e2)
-                det = e1.dot(pv)
-                if ti.abs(det) > 1e-12:
-                    inv = 1.0 / det
-                    u = tv.dot(pv) * inv
-                    v = d.dot(qv) * inv
-                    z = tq * inv
-                    if u >= -1e-6 and v >= -1e-6 and u + v <= 1.0 + 1e-6 and z > near:
-                        if ti.static(atomic):
-                            ti.atomic_min(depth[b, j, i], z)
-                        elif ti.static(inverse):
-                            depth[b, j, i] = ti.max(depth[b, j, i], 1.0 / z)
-                        else:
-                            depth[b, j, i] = ti.min(depth[b, j, i], z)
+                pu = i + 0.5
+                # barycentric weights of the pixel centre
+                w0 = ((u1 - pu) * (v2 - pv) - (u2 - pu) * (v1 - pv)) * inv_area
+                w1 = ((u2 - pu) * (v0 - pv) - (u0 - pu) * (v2 - pv)) * inv_area
+                w2 = 1.0 - w0 - w1
+                if w0 >= eps and w1 >= eps and w2 >= eps:
+                    z = 1.0 / (w0 * iz0 + w1 * iz1 + w2 * iz2)
+                    write_depth(depth, b, j, i, z, atomic, inverse)
+
+
+@ti.func
+def clipped_screen_bounds(
+    a: ti.template(),
+    bb: ti.template(),
+    c: ti.template(),
+    fx: ti.f32,
+    fy: ti.f32,
+    cx: ti.f32,
+    cy: ti.f32,
+    near: ti.f32,
+):
+    """Screen bounds (umin, umax, vmin, vmax) of the triangle clipped at z = near: its
+    projected front vertices and the points where its edges cross the near plane."""
+    umin, umax, vmin, vmax = FAR, -FAR, FAR, -FAR
+    for e in ti.static(range(3)):
+        p = a
+        q = bb
+        if ti.static(e == 1):
+            p = bb
+            q = c
+        if ti.static(e == 2):
+            p = c
+            q = a
+        if p.z >= near:
+            umin = ti.min(umin, fx * p.x / p.z + cx)
+            umax = ti.max(umax, fx * p.x / p.z + cx)
+            vmin = ti.min(vmin, fy * p.y / p.z + cy)
+            vmax = ti.max(vmax, fy * p.y / p.z + cy)
+        if (p.z - near) * (q.z - near) < 0:
+            s = (near - p.z) / (q.z - p.z)
+            x = p + s * (q - p)
+            umin = ti.min(umin, fx * x.x / near + cx)
+            umax = ti.max(umax, fx * x.x / near + cx)
+            vmin = ti.min(vmin, fy * x.y / near + cy)
+            vmax = ti.max(vmax, fy * x.y / near + cy)
+    return umin, umax, vmin, vmax
+
+
+@ti.func
+def raster_triangle_crossing(
+    a: ti.template(),
+    bb: ti.template(),
+    c: ti.template(),
+    b: ti.i32,
+    fx: ti.f32,
+    fy: ti.f32,
+    cx: ti.f32,
+    cy: ti.f32,
+    depth: ti.template(),
+    near: ti.f32,
+    atomic: ti.template(),
+    inverse: ti.template(),
+):
+    """:func:`raster_triangle` for a triangle that crosses the near plane: the ray of every
+    pixel of its clipped screen bounding box cast at it (Moller-Trumbore), hits beyond the
+    near plane kept."""
+    H = depth.shape[1]
+    W = depth.shape[2]
+    umin, umax, vmin, vmax = clipped_screen_bounds(a, bb, c, fx, fy, cx, cy, near)
+    ja = ti.max(0, ti.cast(ti.ceil(ti.max(vmin, -1.0) - 0.5), ti.i32))
+    jb = ti.min(H - 1, ti.cast(ti.floor(ti.min(vmax, H + 1.0) - 0.5), ti.i32))
+    ia = ti.max(0, ti.cast(ti.ceil(ti.max(umin, -1.0) - 0.5), ti.i32))
+    ib = ti.min(W - 1, ti.cast(ti.floor(ti.min(umax, W + 1.0) - 0.5), ti.i32))
+    e1 = bb - a
+    e2 = c - a
+    tv = -a
+    qv = tv.cross(e1)
+    tq = e2.dot(qv)
+    for j in range(ja, jb + 1):
+        dy = (j + 0.5 - cy) / fy
+        for i in range(ia, ib + 1):
+            d = ti.Vector([(i + 0.5 - cx) / fx, dy, 1.0])
+            pv = d.cross(e2)
+            det = e1.dot(pv)
+            if ti.abs(det) > 1e-12:
+                inv = 1.0 / det
+                u = tv.dot(pv) * inv
+                v = d.dot(qv) * inv
+                z = tq * inv
+                if u >= -1e-6 and v >= -1e-6 and u + v <= 1.0 + 1e-6 and z > near:
+                    write_depth(depth, b, j, i, z, atomic, inverse)
 
 
 @ti.func

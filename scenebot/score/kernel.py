@@ -50,7 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenebot.score.geometry import VIEW_COLS, Intrinsics, candidate_views, pack_views
+from scenebot.geometry import Intrinsics
+from scenebot.score.geometry import VIEW_COLS, candidate_views, pack_views
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +66,7 @@ TILE_PX_PER_VIEW = (10, 10)
 """Default tile size (pixels) of the per-view (CPU) pass."""
 
 
-def init_taichi(backend: str = "auto") -> str:
+def init_taichi(backend: str) -> str:
     """Start taichi once per process, without crashing on machines that lack a GPU.
 
     ``ti.init(arch=ti.gpu)`` segfaults on some machines without a GPU, so the GPU backends are
@@ -320,10 +321,11 @@ class TaichiScorer:
         src_views: np.ndarray,
         src_size: tuple[int, int],
         intr: Intrinsics,
-        depth_tolerance: float = 0.03,
-        near_m: float = 0.02,
-        batch_size: int = 256,
-        backend: str = "auto",
+        *,
+        depth_tolerance: float,
+        near_m: float,
+        batch_size: int,
+        backend: str,
         tile_px: tuple[int, int] | None = None,
         per_view: bool | None = None,
     ) -> None:

@@ -33,9 +33,9 @@ def matchable_points(
     xyz: np.ndarray,
     view_dir: np.ndarray,
     view_dist: np.ndarray,
-    max_angle_deg: float = 45.0,
-    max_scale_ratio: float = 2.0,
-    near_m: float = 0.02,
+    max_angle_deg: float,
+    max_scale_ratio: float,
+    near_m: float,
 ) -> np.ndarray:
     """Map points each view sees close enough to how the map saw them to match them.
 
@@ -47,9 +47,11 @@ def matchable_points(
         view_dir: (P, 3) unit mean direction from each point towards its observing cameras.
         view_dist: (P,) mean distance from each point to its observing cameras (m).
         max_angle_deg: largest angle between the direction towards the view and
-            ``view_dir`` (degrees).
-        max_scale_ratio: largest ratio of the view's distance to ``view_dist``, either way.
-        near_m: points nearer than this along the optical axis are not seen (m).
+            ``view_dir`` (degrees; ``score.match_angle_deg``).
+        max_scale_ratio: largest ratio of the view's distance to ``view_dist``, either way
+            (``score.match_scale_ratio``).
+        near_m: points nearer than this along the optical axis are not seen (m;
+            ``score.near_m``).
 
     Returns:
         (N,) int64 count per view.

@@ -59,8 +59,9 @@ class ReferenceScorer:
         src_views: np.ndarray,
         src_size: tuple[int, int],
         intr: Intrinsics,
-        depth_tolerance: float = 0.03,
-        near_m: float = 0.02,
+        *,
+        depth_tolerance: float,
+        near_m: float,
     ) -> None:
         import open3d as o3d
 

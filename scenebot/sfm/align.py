@@ -286,16 +286,61 @@ def turn_in_place_circles(ph: list[Photo]) -> list[list[int]]:
     return runs
 
 
+def _check_circle(
+    xy: np.ndarray,
+    h: np.ndarray,
+    g: np.ndarray,
+    min_photos: int,
+    min_span_deg: float,
+    max_rel_residual: float,
+) -> dict:
+    """Stats of one circle (photos ``g``) fitted on its own: photos, span, radius and
+    residual (SfM units); ``rejected`` says why when it is not usable for the scale."""
+    span = math.degrees(_heading_span(h[g]))
+    d = {"photos": len(g), "span_deg": round(span, 1), "used": False}
+    if len(g) < min_photos:
+        d["rejected"] = f"fewer than {min_photos} photos"
+    elif span < min_span_deg:
+        d["rejected"] = f"heading span < {min_span_deg:g} deg"
+    else:
+        u_c, _, r_c = _fit_circles_lever_arm(xy, h, [g])
+        radius_c = float(np.linalg.norm(u_c))
+        d["radius_units"] = radius_c
+        d["residual_median_units"] = float(np.nanmedian(r_c))
+        if not d["residual_median_units"] <= max_rel_residual * radius_c:
+            d["rejected"] = (
+                f"photos lie {d['residual_median_units'] / radius_c:.0%} of the radius "
+                f"off the fitted circle (> {max_rel_residual:.0%})"
+            )
+    return d
+
+
+def _reject_odd_radii(use: list[dict], max_spread: float) -> np.ndarray:
+    """Which of the usable circles ``use`` keep: with three or more, those whose radius lies
+    within ``max(3 robust sigma, max_spread)`` (relative) of the median; the others are
+    marked ``rejected``."""
+    radii = np.array([d["radius_units"] for d in use])
+    keep = np.ones(len(use), bool)
+    if len(use) >= 3:
+        med = float(np.median(radii))
+        sigma = 1.4826 * float(np.median(np.abs(radii - med)))
+        keep = np.abs(radii - med) <= max(3 * sigma, max_spread * med)
+        for d, k in zip(use, keep, strict=True):
+            if not k:
+                d["rejected"] = "radius disagrees with the other circles"
+    return keep
+
+
 def fit_scale_to_circles(
     xy: np.ndarray,
     h: np.ndarray,
     circles: list[list[int]],
     camera_offset_m: float,
     *,
-    min_photos: int = 8,
+    min_photos: int,
     min_span_deg: float = 90.0,
     max_spread: float = 0.03,
-    max_rel_residual: float = 0.3,
+    max_rel_residual: float,
 ) -> tuple[float | None, np.ndarray, dict]:
     """Metric scale from the camera's known lever arm about the rotation axis.
 
@@ -331,38 +376,15 @@ def fit_scale_to_circles(
     usable: list[np.ndarray] = []
     for g in circles:
         g = np.asarray(g)
-        span = math.degrees(_heading_span(h[g]))
-        d = {"photos": len(g), "span_deg": round(span, 1), "used": False}
-        if len(g) < min_photos:
-            d["rejected"] = f"fewer than {min_photos} photos"
-        elif span < min_span_deg:
-            d["rejected"] = f"heading span < {min_span_deg:g} deg"
-        else:
-            u_c, _, r_c = _fit_circles_lever_arm(xy, h, [g])
-            radius_c = float(np.linalg.norm(u_c))
-            d["radius_units"] = radius_c
-            d["residual_median_units"] = float(np.nanmedian(r_c))
-            if not d["residual_median_units"] <= max_rel_residual * radius_c:
-                d["rejected"] = (
-                    f"photos lie {d['residual_median_units'] / radius_c:.0%} of the radius "
-                    f"off the fitted circle (> {max_rel_residual:.0%})"
-                )
-            else:
-                usable.append(g)
+        d = _check_circle(xy, h, g, min_photos, min_span_deg, max_rel_residual)
+        if "radius_units" in d and "rejected" not in d:
+            usable.append(g)
         info.append(d)
     stats: dict = {"circles": info}
     if not usable:
         return None, np.zeros(2), stats
     use = [d for d in info if "radius_units" in d and "rejected" not in d]
-    radii = np.array([d["radius_units"] for d in use])
-    keep = np.ones(len(use), bool)
-    if len(use) >= 3:
-        med = float(np.median(radii))
-        sigma = 1.4826 * float(np.median(np.abs(radii - med)))
-        keep = np.abs(radii - med) <= max(3 * sigma, max_spread * med)
-        for d, k in zip(use, keep, strict=True):
-            if not k:
-                d["rejected"] = "radius disagrees with the other circles"
+    keep = _reject_odd_radii(use, max_spread)
     groups = [g for g, k in zip(usable, keep, strict=True) if k]
     u, _, r = _fit_circles_lever_arm(xy, h, groups)
     radius = float(np.linalg.norm(u))
@@ -399,14 +421,14 @@ def robot_frame_transform(
     rec: pycolmap.Reconstruction,
     photos: list[Photo],
     *,
-    camera_yaw_deg: float = 0.0,
-    use_compass: bool = True,
-    min_odometry_pairs: int = 5,
+    camera_yaw_deg: float,
+    use_compass: bool,
+    min_odometry_pairs: int,
     known_distance: tuple[str, str, float] | None = None,
     previous: pycolmap.Reconstruction | None = None,
-    camera_offset_m: float | None = None,
-    min_circle_photos: int = 8,
-    max_circle_residual: float = 0.3,
+    camera_offset_m: float | None,
+    min_circle_photos: int,
+    max_circle_residual: float,
 ) -> Alignment:
     """The similarity from the model's frame to the robot frame (see module docstring).
 
@@ -421,7 +443,8 @@ def robot_frame_transform(
             taken from it when this set has too little odometry).
         camera_offset_m: the camera centre's known distance (m) from the robot's rotation
             axis: metric scale from circles of photos turned in place
-            (:func:`fit_scale_to_circles`), odometry as fallback and cross-check.
+            (:func:`fit_scale_to_circles`), odometry as fallback and cross-check; None: no
+            lever-arm scale.
         min_circle_photos: fewest photos of a turn-in-place circle used for the scale.
         max_circle_residual: largest median residual of a circle's photos from its fitted
             circle, as a share of its radius, for it to count in the scale.
@@ -462,14 +485,14 @@ def fit_robot_frame(
     U: np.ndarray,
     V: np.ndarray,
     *,
-    camera_yaw_deg: float = 0.0,
-    use_compass: bool = True,
-    min_odometry_pairs: int = 5,
+    camera_yaw_deg: float,
+    use_compass: bool,
+    min_odometry_pairs: int,
     known_distance: tuple[str, str, float] | None = None,
     previous_centers: dict[str, np.ndarray] | None = None,
-    camera_offset_m: float | None = None,
-    min_circle_photos: int = 8,
-    max_circle_residual: float = 0.3,
+    camera_offset_m: float | None,
+    min_circle_photos: int,
+    max_circle_residual: float,
 ) -> Alignment:
     """The robot-frame similarity from camera geometry arrays (core of
     :func:`robot_frame_transform`).
@@ -479,6 +502,8 @@ def fit_robot_frame(
         C: (N, 3) camera centres, model frame.
         U: (N, 3) camera up vectors (-y axis of the OpenCV camera), model frame.
         V: (N, 3) viewing directions (+z axis of the camera), model frame.
+        camera_yaw_deg, use_compass, min_odometry_pairs, known_distance: see
+            :func:`robot_frame_transform`.
         previous_centers: photo name -> (3,) centre in the previous round's robot frame.
         camera_offset_m: known distance (m) of the camera centre from the rotation axis;
             when set, the scale comes from turn-in-place circles (odometry is the fallback
@@ -494,37 +519,90 @@ def fit_robot_frame(
     prev_c = previous_centers or {}
 
     # 1. plane
-    n, pstats = fit_plane_normal(C, U)
-    stats.update(pstats)
-    R1 = _rot_to_z(n)
-    V1 = V @ R1.T
-    cam_yaw = math.radians(camera_yaw_deg)
-    psi = np.arctan2(V1[:, 1], V1[:, 0]) - cam_yaw  # robot headings, model frame
+    R1, psi = _level(C, U, V, camera_yaw_deg, stats)
 
     # 2. heading
-    compass = np.array([np.nan if p.compass_deg is None else p.compass_deg for p in ph])
-    odo_theta = np.array([np.nan if p.odometry is None else p.odometry[2] for p in ph])
-    has_c = ~np.isnan(compass)
-    has_o = ~np.isnan(odo_theta)
-    if use_compass and has_c.sum() >= 2:
-        yaw = robust_circular_mean(_wrap(np.radians(compass[has_c]) - psi[has_c]))
-        heading_source = "compass"
-        resid = _wrap(np.radians(compass[has_c]) - psi[has_c] - yaw)
-        stats["compass_residual_median_deg"] = float(np.degrees(np.median(np.abs(resid))))
-    elif has_o.sum() >= 2:
-        yaw = robust_circular_mean(_wrap(odo_theta[has_o] - psi[has_o]))
-        heading_source = "odometry"
-    else:
-        yaw = -float(psi[0])
-        heading_source = "first_photo"
+    yaw, heading_source = _fit_heading(ph, psi, use_compass, stats)
     Rz = _rot_z(yaw)
     R = Rz @ R1
     C2 = C @ R.T
     h = _wrap(psi + yaw)  # robot headings in the robot frame
 
     # 3. scale
-    scale, scale_source, offset = 1.0, "none", None
     idx = {nm: k for k, nm in enumerate(names)}
+    est = _odometry_scale(_odometry_pairs(ph, idx, C2, h), min_odometry_pairs, stats)
+    if camera_offset_m is not None:
+        est.circles, est.lever_arm = _circle_scale(
+            ph, C2, h, camera_offset_m, min_circle_photos, max_circle_residual, est.odometry, stats
+        )
+    scale, scale_source, offset = _choose_scale(est, known_distance, idx, C2, bool(prev_c))
+
+    # 4. translation
+    scale, scale_source, t, C3 = _translation(ph, C2, h, scale, scale_source, offset, prev_c, stats)
+    z_res = C3[:, 2] + t[2]
+    stats["plane_rms_m" if scale_source != "none" else "plane_rms_units"] = float(
+        np.sqrt(np.mean(z_res**2))
+    )
+    return Alignment(scale, R, t, scale_source, heading_source, offset, stats)
+
+
+def _level(
+    C: np.ndarray, U: np.ndarray, V: np.ndarray, camera_yaw_deg: float, stats: dict
+) -> tuple[np.ndarray, np.ndarray]:
+    """Step 1: the rotation ``R1`` taking the camera centres' plane to z = 0 (plane stats
+    into ``stats``) and the robot headings ``psi`` (N,) (rad) in the levelled model frame."""
+    n, pstats = fit_plane_normal(C, U)
+    stats.update(pstats)
+    R1 = _rot_to_z(n)
+    V1 = V @ R1.T
+    cam_yaw = math.radians(camera_yaw_deg)
+    psi = np.arctan2(V1[:, 1], V1[:, 0]) - cam_yaw  # robot headings, model frame
+    return R1, psi
+
+
+def _fit_heading(
+    ph: list[Photo], psi: np.ndarray, use_compass: bool, stats: dict
+) -> tuple[float, str]:
+    """The yaw (rad) turning model headings ``psi`` onto the compass (else odometry theta,
+    else the first photo's heading to 0), and its source; compass residuals into ``stats``."""
+    compass = np.array([np.nan if p.compass_deg is None else p.compass_deg for p in ph])
+    odo_theta = np.array([np.nan if p.odometry is None else p.odometry[2] for p in ph])
+    has_c = ~np.isnan(compass)
+    has_o = ~np.isnan(odo_theta)
+    if use_compass and has_c.sum() >= 2:
+        yaw = robust_circular_mean(_wrap(np.radians(compass[has_c]) - psi[has_c]))
+        resid = _wrap(np.radians(compass[has_c]) - psi[has_c] - yaw)
+        stats["compass_residual_median_deg"] = float(np.degrees(np.median(np.abs(resid))))
+        return yaw, "compass"
+    if has_o.sum() >= 2:
+        return robust_circular_mean(_wrap(odo_theta[has_o] - psi[has_o])), "odometry"
+    return -float(psi[0]), "first_photo"
+
+
+@dataclass
+class _ScaleEstimates:
+    """The metric scale estimates of step 3 (:func:`fit_robot_frame`) before one is chosen.
+
+    Attributes:
+        pairs: consecutive photo pairs with odometry; ``moving``: those driving > 5 cm.
+        odometry, odometry_offset: scale and camera offset from odometry, or None.
+        circles, lever_arm: scale from the turn-in-place circles and the lever arm ``u``
+            (SfM units), or None.
+    """
+
+    pairs: int
+    moving: int
+    odometry: float | None = None
+    odometry_offset: tuple[float, float] | None = None
+    circles: float | None = None
+    lever_arm: np.ndarray | None = None
+
+
+def _odometry_pairs(
+    ph: list[Photo], idx: dict[str, int], C2: np.ndarray, h: np.ndarray
+) -> list[tuple]:
+    """Consecutive photo pairs of each round with odometry: (SfM camera displacement (2,),
+    heading i, heading j, odometry displacement (2,))."""
     rows = []
     by_round: dict[int, list[Photo]] = {}
     for p in ph:
@@ -536,81 +614,131 @@ def fit_robot_frame(
             i, j = idx[a.name], idx[b.name]
             dp = np.subtract(b.odometry[:2], a.odometry[:2])
             rows.append((C2[j, :2] - C2[i, :2], h[i], h[j], dp))
+    return rows
+
+
+def _odometry_scale(rows: list[tuple], min_odometry_pairs: int, stats: dict) -> _ScaleEstimates:
+    """The odometry scale fit on the photo pairs ``rows`` when there are enough (stats into
+    ``stats``)."""
     moving = sum(np.linalg.norm(r[3]) > 0.05 for r in rows)
-    odo_scale, odo_offset = None, None
+    est = _ScaleEstimates(pairs=len(rows), moving=moving)
     if len(rows) >= min_odometry_pairs and moving >= 2:
         dc, hi, hj, dp = (np.array(x) for x in zip(*rows, strict=True))
-        odo_scale, o, ostats = fit_scale_to_odometry(dc, hi, hj, dp)
+        est.odometry, o, ostats = fit_scale_to_odometry(dc, hi, hj, dp)
         stats.update(ostats)
-        stats["scale_odometry"] = odo_scale
-        odo_offset = (float(o[0]), float(o[1]))
-    circle_scale = None
-    if camera_offset_m is not None:
-        circle_scale, u, cstats = fit_scale_to_circles(
-            C2[:, :2],
-            h,
-            turn_in_place_circles(ph),
-            camera_offset_m,
-            min_photos=min_circle_photos,
-            max_rel_residual=max_circle_residual,
+        stats["scale_odometry"] = est.odometry
+        est.odometry_offset = (float(o[0]), float(o[1]))
+    return est
+
+
+def _circle_scale(
+    ph: list[Photo],
+    C2: np.ndarray,
+    h: np.ndarray,
+    camera_offset_m: float,
+    min_circle_photos: int,
+    max_circle_residual: float,
+    odo_scale: float | None,
+    stats: dict,
+) -> tuple[float | None, np.ndarray]:
+    """The lever-arm scale (None: no usable circle) and lever arm ``u`` (SfM units) from the
+    turn-in-place circles (stats into ``stats``); warns when no circle is usable or the
+    odometry scale ``odo_scale`` disagrees by more than 5 %."""
+    circle_scale, u, cstats = fit_scale_to_circles(
+        C2[:, :2],
+        h,
+        turn_in_place_circles(ph),
+        camera_offset_m,
+        min_photos=min_circle_photos,
+        max_rel_residual=max_circle_residual,
+    )
+    stats.update(cstats)
+    stats["scale_circles"] = circle_scale
+    if circle_scale is None:
+        why = sorted({c.get("rejected", "") for c in cstats["circles"]} - {""})
+        log.warning(
+            "sfm.camera_offset_m is set but no circle of photos turned in place is usable "
+            "for the scale (needs >= %d registered photos over >= 90 deg of heading, "
+            "within sfm.max_circle_residual = %.0f %% of the radius of its fitted circle; "
+            "seen: %s): metric scale from %s instead",
+            min_circle_photos,
+            100 * max_circle_residual,
+            "; ".join(why) or "no turn-in-place circle",
+            "odometry" if odo_scale else "no source",
         )
-        stats.update(cstats)
-        stats["scale_circles"] = circle_scale
-        if circle_scale is None:
-            why = sorted({c.get("rejected", "") for c in cstats["circles"]} - {""})
+    elif odo_scale:
+        diff = odo_scale / circle_scale - 1.0
+        stats["scale_odometry_vs_circles"] = diff
+        if abs(diff) > 0.05:
             log.warning(
-                "sfm.camera_offset_m is set but no circle of photos turned in place is usable "
-                "for the scale (needs >= %d registered photos over >= 90 deg of heading, "
-                "within sfm.max_circle_residual = %.0f %% of the radius of its fitted circle; "
-                "seen: %s): metric scale from %s instead",
-                min_circle_photos,
-                100 * max_circle_residual,
-                "; ".join(why) or "no turn-in-place circle",
-                "odometry" if odo_scale else "no source",
+                "metric scale: odometry drive distances give %.1f %% %s than the camera "
+                "lever arm (sfm.camera_offset_m = %.3f m); using the lever arm. Check "
+                "the mount measurement or the wheel odometry.",
+                abs(diff) * 100,
+                "more" if diff > 0 else "less",
+                camera_offset_m,
             )
-        elif odo_scale:
-            diff = odo_scale / circle_scale - 1.0
-            stats["scale_odometry_vs_circles"] = diff
-            if abs(diff) > 0.05:
-                log.warning(
-                    "metric scale: odometry drive distances give %.1f %% %s than the camera "
-                    "lever arm (sfm.camera_offset_m = %.3f m); using the lever arm. Check "
-                    "the mount measurement or the wheel odometry.",
-                    abs(diff) * 100,
-                    "more" if diff > 0 else "less",
-                    camera_offset_m,
-                )
+    return circle_scale, u
+
+
+def _choose_scale(
+    est: _ScaleEstimates,
+    known_distance: tuple[str, str, float] | None,
+    idx: dict[str, int],
+    C2: np.ndarray,
+    has_previous: bool,
+) -> tuple[float, str, tuple[float, float] | None]:
+    """Scale, its source and the camera offset (m) by priority: known distance, lever arm,
+    odometry, previous model (scale set in the translation step), none (scale 1)."""
     if known_distance is not None:
         a, b, dist = known_distance
         if a not in idx or b not in idx:
             raise ValueError(
                 f"sfm.known_distance names photos {a!r}, {b!r}; not both registered "
-                f"(registered: {len(names)} photos)"
+                f"(registered: {len(C2)} photos)"
             )
-        scale = dist / float(np.linalg.norm(C2[idx[a]] - C2[idx[b]]))
-        scale_source = "known_distance"
-    elif circle_scale is not None:
-        scale, scale_source = circle_scale, "camera_lever_arm"
-        offset = (float(circle_scale * u[0]), float(circle_scale * u[1]))
-    elif odo_scale is not None:
-        if not odo_scale > 0:
+        return dist / float(np.linalg.norm(C2[idx[a]] - C2[idx[b]])), "known_distance", None
+    if est.circles is not None:
+        u = est.lever_arm
+        offset = (float(est.circles * u[0]), float(est.circles * u[1]))
+        return est.circles, "camera_lever_arm", offset
+    if est.odometry is not None:
+        if not est.odometry > 0:
             raise ValueError(
-                f"odometry scale fit gave {odo_scale:.3g}: odometry and SfM disagree; check "
+                f"odometry scale fit gave {est.odometry:.3g}: odometry and SfM disagree; check "
                 "the capture log's odometry"
             )
-        scale, scale_source, offset = odo_scale, "odometry", odo_offset
-    elif prev_c:
-        scale_source = "previous_model"
-    else:
-        log.warning(
-            "no metric scale: %d consecutive odometry pairs (%d moving), no "
-            "sfm.known_distance or sfm.camera_offset_m; the model keeps SfM units (scale 1)",
-            len(rows),
-            moving,
-        )
-    C3 = scale * C2
+        return est.odometry, "odometry", est.odometry_offset
+    if has_previous:
+        return 1.0, "previous_model", None
+    log.warning(
+        "no metric scale: %d consecutive odometry pairs (%d moving), no "
+        "sfm.known_distance or sfm.camera_offset_m; the model keeps SfM units (scale 1)",
+        est.pairs,
+        est.moving,
+    )
+    return 1.0, "none", None
 
-    # 4. translation
+
+def _translation(
+    ph: list[Photo],
+    C2: np.ndarray,
+    h: np.ndarray,
+    scale: float,
+    scale_source: str,
+    offset: tuple[float, float] | None,
+    prev_c: dict[str, np.ndarray],
+    stats: dict,
+) -> tuple[float, str, np.ndarray, np.ndarray]:
+    """Step 4: the translation (median height to 0; x, y anchored to the previous model's
+    shared photos, else round 0's first odometry, else the first photo).
+
+    Returns:
+        The scale and its source (the previous model's when it gives the scale), the
+        translation ``t`` (3,) and the scaled centres ``C3`` (N, 3).
+    """
+    names = [p.name for p in ph]
+    C3 = scale * C2
     t = np.zeros(3)
     t[2] = -float(np.median(C3[:, 2]))
     shared = [k for k, nm in enumerate(names) if nm in prev_c]
@@ -628,22 +756,23 @@ def fit_robot_frame(
         t[:2] = np.median(P[:, :2] - C3[shared, :2], 0)
         stats["anchor"] = f"previous_model ({len(shared)} shared photos)"
     else:
-        r0 = [k for k, p in enumerate(ph) if p.odometry is not None and p.round == 0]
-        if r0:
-            k = min(r0, key=lambda k: ph[k].index)
-            robot_xy = C3[k, :2]
-            if offset is not None:
-                robot_xy = robot_xy - _rot_z(h[k])[:2, :2] @ np.asarray(offset)
-            t[:2] = np.asarray(ph[k].odometry[:2]) - robot_xy
-            stats["anchor"] = f"odometry of {ph[k].name}"
-        else:
-            t[:2] = -C3[0, :2]
-            stats["anchor"] = f"first photo {ph[0].name} at the origin"
-    z_res = C3[:, 2] + t[2]
-    stats["plane_rms_m" if scale_source != "none" else "plane_rms_units"] = float(
-        np.sqrt(np.mean(z_res**2))
-    )
-    return Alignment(scale, R, t, scale_source, heading_source, offset, stats)
+        t[:2], stats["anchor"] = _anchor_without_previous(ph, C3, h, offset)
+    return scale, scale_source, t, C3
+
+
+def _anchor_without_previous(
+    ph: list[Photo], C3: np.ndarray, h: np.ndarray, offset: tuple[float, float] | None
+) -> tuple[np.ndarray, str]:
+    """x, y translation putting round 0's first photo at its odometry (robot position, so
+    less the camera offset), else the first photo at the origin; and how (``anchor``)."""
+    r0 = [k for k, p in enumerate(ph) if p.odometry is not None and p.round == 0]
+    if r0:
+        k = min(r0, key=lambda k: ph[k].index)
+        robot_xy = C3[k, :2]
+        if offset is not None:
+            robot_xy = robot_xy - _rot_z(h[k])[:2, :2] @ np.asarray(offset)
+        return np.asarray(ph[k].odometry[:2]) - robot_xy, f"odometry of {ph[k].name}"
+    return -C3[0, :2], f"first photo {ph[0].name} at the origin"
 
 
 def align_to_robot_frame(rec: pycolmap.Reconstruction, alignment: Alignment) -> None:

@@ -72,6 +72,39 @@ def _geometry(
     return C, np.arctan2(V[:, 1], V[:, 0]) - camera_yaw
 
 
+def _circle_fit(
+    rec: pycolmap.Reconstruction,
+    ids: list[int],
+    circles: list[list[int]],
+    lever_arm: np.ndarray,
+    camera_yaw: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`circle_residuals` of the images ``ids`` of ``rec`` (``camera_yaw`` in rad)."""
+    C, h = _geometry(rec, ids, camera_yaw)
+    return circle_residuals(C, h, circles, lever_arm)
+
+
+def _retriangulate(
+    rec: pycolmap.Reconstruction,
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    options: pycolmap.IncrementalPipelineOptions,
+) -> pycolmap.Reconstruction:
+    """``rec`` with its points triangulated anew from the database, poses and intrinsics
+    held."""
+    work.mkdir(parents=True, exist_ok=True)
+    return pycolmap.triangulate_points(
+        rec,
+        str(db_path),
+        str(image_root),
+        str(work),
+        clear_points=True,
+        options=options,
+        refine_intrinsics=False,
+    )
+
+
 def _prior_bundle_adjustment(
     rec: pycolmap.Reconstruction,
     ids: list[int],
@@ -122,15 +155,15 @@ def repair_circles(
     work: Path,
     *,
     triangulation_options: pycolmap.IncrementalPipelineOptions,
-    max_residual_m: float = 0.02,
-    prior_std_m: float = 0.005,
-    iterations: int = 2,
-    min_photos: int = 8,
-    camera_yaw_deg: float = 0.0,
-    max_error_px: float = 1.0,
+    max_residual_m: float,
+    prior_std_m: float,
+    iterations: int,
+    min_photos: int,
+    camera_yaw_deg: float,
+    max_error_px: float,
     refine_focal_length: bool = False,
-    refine_extra_params: bool = True,
-    num_threads: int = -1,
+    refine_extra_params: bool,
+    num_threads: int,
     constant_names: frozenset[str] | set[str] = frozenset(),
 ) -> tuple[pycolmap.Reconstruction, dict]:
     """Move photos that left their turn-in-place circle back and re-adjust (see module doc).
@@ -170,38 +203,13 @@ def repair_circles(
     stats: dict = {"circles": len(circles), "moved": {}}
     if not circles or not math.isfinite(float(np.linalg.norm(arm))):
         return rec, stats
-    C, h = _geometry(rec, ids, yaw)
-    pred, res = circle_residuals(C, h, circles, arm)
+    pred, res = _circle_fit(rec, ids, circles, arm, yaw)
     stats["residual_median_before_m"] = float(np.nanmedian(res))
-    bad = np.flatnonzero(res > max_residual_m)
-    for k in bad:
-        im = rec.image(ids[k])
-        rot = im.cam_from_world().rotation
-        rec.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(rot, -rot.matrix() @ pred[k])
-        stats["moved"][ph[k].name] = round(float(res[k]), 4)
-    if len(bad):
-        log.warning(
-            "%d photo(s) lay %.1f-%.1f cm off their circle of photos turned in place; moved "
-            "back onto it: %s",
-            len(bad),
-            100 * float(res[bad].min()),
-            100 * float(res[bad].max()),
-            ", ".join(ph[k].name for k in bad[:12]) + (" ..." if len(bad) > 12 else ""),
-        )
-        work.mkdir(parents=True, exist_ok=True)
-        rec = pycolmap.triangulate_points(
-            rec,
-            str(db_path),
-            str(image_root),
-            str(work),
-            clear_points=True,
-            options=triangulation_options,
-            refine_intrinsics=False,
-        )
+    if _move_onto_circles(rec, ids, ph, pred, res, max_residual_m, stats["moved"]):
+        rec = _retriangulate(rec, db_path, image_root, work, triangulation_options)
     for _ in range(iterations):
         filter_observations(rec, max_error_px)
-        C, h = _geometry(rec, ids, yaw)
-        pred, _ = circle_residuals(C, h, circles, arm)
+        pred, _ = _circle_fit(rec, ids, circles, arm, yaw)
         _prior_bundle_adjustment(
             rec,
             ids,
@@ -213,8 +221,40 @@ def repair_circles(
             constant_ids,
         )
     filter_observations(rec, max_error_px)
-    C, h = _geometry(rec, ids, yaw)
-    _, res = circle_residuals(C, h, circles, arm)
+    _, res = _circle_fit(rec, ids, circles, arm, yaw)
     stats["residual_median_after_m"] = float(np.nanmedian(res))
     stats["residual_max_m"] = float(np.nanmax(res))
     return rec, stats
+
+
+def _move_onto_circles(
+    rec: pycolmap.Reconstruction,
+    ids: list[int],
+    ph: list[Photo],
+    pred: np.ndarray,
+    res: np.ndarray,
+    max_residual_m: float,
+    moved: dict[str, float],
+) -> int:
+    """Move the photos farther than ``max_residual_m`` from their circle position ``pred``
+    onto it, rotations kept (logged; name -> distance (m) into ``moved``).
+
+    Returns:
+        How many photos were moved.
+    """
+    bad = np.flatnonzero(res > max_residual_m)
+    for k in bad:
+        im = rec.image(ids[k])
+        rot = im.cam_from_world().rotation
+        rec.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(rot, -rot.matrix() @ pred[k])
+        moved[ph[k].name] = round(float(res[k]), 4)
+    if len(bad):
+        log.warning(
+            "%d photo(s) lay %.1f-%.1f cm off their circle of photos turned in place; moved "
+            "back onto it: %s",
+            len(bad),
+            100 * float(res[bad].min()),
+            100 * float(res[bad].max()),
+            ", ".join(ph[k].name for k in bad[:12]) + (" ..." if len(bad) > 12 else ""),
+        )
+    return len(bad)

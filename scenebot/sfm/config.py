@@ -2,23 +2,21 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from scenebot.settings import Settings
 
 
-class KnownDistance(BaseModel):
+class KnownDistance(Settings):
     """A known distance between the camera centres of two photos (bring-your-own photos)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     image_a: str = Field(description="File name of the first photo (as in the photo folder).")
     image_b: str = Field(description="File name of the second photo.")
     distance_m: float = Field(gt=0.0, description="Distance between their camera centres (m).")
 
 
-class SfmConfig(BaseModel):
+class SfmConfig(Settings):
     """Settings of structure from motion (``scenebot.sfm.stage.run``)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     # --- features -------------------------------------------------------------------------
     max_num_features: int = Field(

@@ -11,6 +11,8 @@ Truth is read only here, for evaluation.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pycolmap
@@ -97,18 +99,45 @@ def robust_similarity(
     return s, R, t, inl, d
 
 
-def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> dict:
-    """Accuracy of the registered cameras against true poses.
+@dataclass
+class _TruthPairs:
+    """Registered photos with a true pose: estimated and true camera centres (N, 3),
+    viewing directions (3,) and rotations (3, 3) (cam_from_world)."""
 
-    Args:
-        rec: the model (robot frame).
-        truths: photo name -> ``truth`` record of the capture log (``center`` (3,) m,
-            ``R_cam_from_world`` 9 row-major).
+    names: list[str]
+    est_c: np.ndarray
+    true_c: np.ndarray
+    est_v: list[np.ndarray]
+    true_v: list[np.ndarray]
+    est_r: list[np.ndarray]
+    true_r: list[np.ndarray]
 
-    Returns:
-        The content of ``accuracy.json``: per-photo errors and summaries in metres, inches,
-        centimetres and degrees, the similarity, and the metric scale error.
-    """
+    def subset(self, keep: np.ndarray) -> _TruthPairs:
+        """The photos at indices ``keep``."""
+        return _TruthPairs(
+            [self.names[i] for i in keep],
+            self.est_c[keep],
+            self.true_c[keep],
+            [self.est_v[i] for i in keep],
+            [self.true_v[i] for i in keep],
+            [self.est_r[i] for i in keep],
+            [self.true_r[i] for i in keep],
+        )
+
+
+class _Errors(NamedTuple):
+    """Per-photo errors: position (m) in total, along the true line of sight and transverse
+    to it, heading and rotation (deg)."""
+
+    total: np.ndarray
+    los: np.ndarray
+    transverse: np.ndarray
+    heading: np.ndarray
+    rotation: np.ndarray
+
+
+def _truth_pairs(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> _TruthPairs:
+    """The registered photos of ``rec`` that have a complete ``truth`` record."""
     names, est_c, est_v, true_c, true_v, true_r, est_r = [], [], [], [], [], [], []
     for iid in rec.reg_image_ids():
         im = rec.image(iid)
@@ -124,51 +153,70 @@ def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> 
         true_c.append(np.asarray(tr["center"], float))
         true_v.append(R_true[2])
         true_r.append(R_true)
-    if len(names) < 3:
-        return {"evaluated": len(names), "note": "fewer than 3 registered photos with truth"}
-    est_c, true_c = np.array(est_c), np.array(true_c)
-    # Robust similarity: photos registered grossly wrong (repeated textures can place a few
-    # photos metres off) are reported apart and kept out of the statistics; those a few
-    # centimetres to decimetres off stay in the statistics but do not steer the fit.
-    s, R, t, fit_inl, d = robust_similarity(est_c, true_c)
-    gross_m = max(GROSS_FACTOR * float(np.median(d[fit_inl])), GROSS_MIN_M)
-    inl = d <= gross_m
-    gross = [(names[i], float(d[i])) for i in np.flatnonzero(~inl)]
-    keep = np.flatnonzero(inl)
-    names = [names[i] for i in keep]
-    est_c, true_c = est_c[keep], true_c[keep]
-    est_v = [est_v[i] for i in keep]
-    est_r = [est_r[i] for i in keep]
-    true_v = [true_v[i] for i in keep]
-    true_r = [true_r[i] for i in keep]
-    mapped = s * est_c @ R.T + t
-    err = mapped - true_c
-    tv = np.array(true_v)
+    return _TruthPairs(names, np.array(est_c), np.array(true_c), est_v, true_v, est_r, true_r)
+
+
+def _pose_errors(pairs: _TruthPairs, s: float, R: np.ndarray, t: np.ndarray) -> _Errors:
+    """The errors of the estimated poses mapped by the similarity ``(s, R, t)``."""
+    mapped = s * pairs.est_c @ R.T + t
+    err = mapped - pairs.true_c
+    tv = np.array(pairs.true_v)
     los = np.abs((err * tv).sum(1))
     transverse = np.linalg.norm(err - (err * tv).sum(1, keepdims=True) * tv, axis=1)
     total = np.linalg.norm(err, axis=1)
-    ev = np.array(est_v) @ R.T
+    ev = np.array(pairs.est_v) @ R.T
     yaw_e = np.arctan2(ev[:, 1], ev[:, 0])
     yaw_t = np.arctan2(tv[:, 1], tv[:, 0])
     heading = np.degrees(np.abs((yaw_e - yaw_t + np.pi) % (2 * np.pi) - np.pi))
     rot_err = []
-    for Re, Rt in zip(est_r, true_r, strict=True):
+    for Re, Rt in zip(pairs.est_r, pairs.true_r, strict=True):
         # camera orientation in the true world: R_cam_from_world_est @ R^T
         dR = (Re @ R.T) @ Rt.T
         rot_err.append(math.degrees(math.acos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
-    rot_err = np.array(rot_err)
-    # tilt between the robot frame's z and the world's z, and the robot frame's yaw
+    return _Errors(total, los, transverse, heading, np.array(rot_err))
+
+
+def _frame_tilt_and_yaw(R: np.ndarray) -> tuple[float, float]:
+    """Tilt between the robot frame's z and the world's z, and the robot frame's yaw (deg)."""
     z_in_world = R @ np.array([0.0, 0.0, 1.0])
     tilt = math.degrees(math.acos(np.clip(z_in_world[2], -1, 1)))
     x_in_world = R @ np.array([1.0, 0.0, 0.0])
     frame_yaw = math.degrees(math.atan2(x_in_world[1], x_in_world[0]))
-    out = {
-        "evaluated": len(names),
+    return tilt, frame_yaw
+
+
+def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> dict:
+    """Accuracy of the registered cameras against true poses.
+
+    Args:
+        rec: the model (robot frame).
+        truths: photo name -> ``truth`` record of the capture log (``center`` (3,) m,
+            ``R_cam_from_world`` 9 row-major).
+
+    Returns:
+        The content of ``accuracy.json``: per-photo errors and summaries in metres, inches,
+        centimetres and degrees, the similarity, and the metric scale error.
+    """
+    pairs = _truth_pairs(rec, truths)
+    if len(pairs.names) < 3:
+        return {"evaluated": len(pairs.names), "note": "fewer than 3 registered photos with truth"}
+    # Robust similarity: photos registered grossly wrong (repeated textures can place a few
+    # photos metres off) are reported apart and kept out of the statistics; those a few
+    # centimetres to decimetres off stay in the statistics but do not steer the fit.
+    s, R, t, fit_inl, d = robust_similarity(pairs.est_c, pairs.true_c)
+    gross_m = max(GROSS_FACTOR * float(np.median(d[fit_inl])), GROSS_MIN_M)
+    inl = d <= gross_m
+    gross = [(pairs.names[i], float(d[i])) for i in np.flatnonzero(~inl)]
+    pairs = pairs.subset(np.flatnonzero(inl))
+    e = _pose_errors(pairs, s, R, t)
+    tilt, frame_yaw = _frame_tilt_and_yaw(R)
+    return {
+        "evaluated": len(pairs.names),
         "registered": rec.num_reg_images(),
         "gross_errors": {
             "count": len(gross),
             "threshold_m": gross_m,
-            "photos": {n: round(e, 3) for n, e in gross},
+            "photos": {n: round(err, 3) for n, err in gross},
             "note": "registered farther than threshold_m from the truth after the robust "
             "similarity; left out of the statistics",
         },
@@ -182,22 +230,26 @@ def evaluate_accuracy(rec: pycolmap.Reconstruction, truths: dict[str, dict]) -> 
         "metric_scale_error": abs(1.0 / s - 1.0),
         "frame_tilt_deg": tilt,
         "frame_yaw_in_world_deg": frame_yaw,
-        "position_error_m": summary_stats(total),
-        "line_of_sight_error_m": summary_stats(los),
-        "transverse_error_m": summary_stats(transverse),
-        "position_error_cm": summary_stats(total * 100),
-        "position_error_in": summary_stats(total / M_PER_INCH),
-        "heading_error_deg": summary_stats(heading),
-        "rotation_error_deg": summary_stats(rot_err),
-        "per_photo": [
-            {
-                "name": n,
-                "position_error_m": float(a),
-                "line_of_sight_m": float(b),
-                "transverse_m": float(c),
-                "heading_error_deg": float(d),
-            }
-            for n, a, b, c, d in zip(names, total, los, transverse, heading, strict=True)
-        ],
+        "position_error_m": summary_stats(e.total),
+        "line_of_sight_error_m": summary_stats(e.los),
+        "transverse_error_m": summary_stats(e.transverse),
+        "position_error_cm": summary_stats(e.total * 100),
+        "position_error_in": summary_stats(e.total / M_PER_INCH),
+        "heading_error_deg": summary_stats(e.heading),
+        "rotation_error_deg": summary_stats(e.rotation),
+        "per_photo": _per_photo(pairs.names, e),
     }
-    return out
+
+
+def _per_photo(names: list[str], e: _Errors) -> list[dict]:
+    """accuracy.json's ``per_photo`` records."""
+    return [
+        {
+            "name": n,
+            "position_error_m": float(a),
+            "line_of_sight_m": float(b),
+            "transverse_m": float(c),
+            "heading_error_deg": float(d),
+        }
+        for n, a, b, c, d in zip(names, e.total, e.los, e.transverse, e.heading, strict=True)
+    ]

@@ -85,10 +85,11 @@ def robust_refinement(
     rec: pycolmap.Reconstruction,
     max_error_px: float,
     iterations: int,
-    num_threads: int = -1,
+    num_threads: int,
     relax_first: bool = False,
     refine_focal_length: bool = True,
-    refine_extra_params: bool = True,
+    *,
+    refine_extra_params: bool,
     constant_names: frozenset[str] | set[str] = frozenset(),
 ) -> dict:
     """Final robust bundle adjustment: drop observations beyond ``max_error_px``, then
@@ -311,26 +312,7 @@ def map_photos(
     mode = "scratch"
     models: dict[int, pycolmap.Reconstruction] = {}
     if previous is not None and cfg.incremental:
-        prev = pycolmap.Reconstruction(previous)
-        keep = set(names)
-        for iid in list(prev.reg_image_ids()):
-            if prev.image(iid).name not in keep:
-                prev.deregister_frame(prev.image(iid).frame_id)
-        mode = "incremental"
-        try:
-            models = _run(db_path, image_root, work, cfg, names, prev, fix_focal)
-        except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
-            log.warning("incremental mapping from the previous model failed (%s)", exc)
-            models = {}
-        best = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
-        if best is None or best.num_reg_images() < cfg.min_registered_share * len(names):
-            log.warning(
-                "incremental mapping registered %d of %d photos: mapping from scratch",
-                0 if best is None else best.num_reg_images(),
-                len(names),
-            )
-            mode = "incremental->scratch"
-            models = {}
+        models, mode = _continue(db_path, image_root, work, cfg, names, previous, fix_focal)
     attempts = 0
     if not models:
         models, attempts = _scratch(db_path, image_root, work, cfg, names, fix_focal)
@@ -350,6 +332,57 @@ def map_photos(
         kept_previous = frozenset(
             best.image(i).name for i in best.reg_image_ids() if best.image(i).name in prev_names
         )
+    dropped = _dropped(db_path, names, ranked, cfg)
+    if cfg.retriangulate:
+        best = _retriangulate(best, db_path, image_root, work, cfg, names, fix_focal)
+    refinement = {}
+    if cfg.refine_iterations > 0:
+        refinement = _refine(best, cfg, fix_focal, kept_previous)
+    seconds = time.perf_counter() - t0
+    return MappingResult(best, mode, len(ranked), dropped, seconds, refinement, attempts)
+
+
+def _continue(
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    cfg: SfmConfig,
+    names: list[str],
+    previous: pycolmap.Reconstruction,
+    fix_focal: bool,
+) -> tuple[dict[int, pycolmap.Reconstruction], str]:
+    """Map continuing from ``previous`` (its photos outside ``names`` removed).
+
+    Returns:
+        The models and the mode: ``incremental``, or no models and ``incremental->scratch``
+        when fewer than ``cfg.min_registered_share`` of the photos registered.
+    """
+    prev = pycolmap.Reconstruction(previous)
+    keep = set(names)
+    for iid in list(prev.reg_image_ids()):
+        if prev.image(iid).name not in keep:
+            prev.deregister_frame(prev.image(iid).frame_id)
+    try:
+        models = _run(db_path, image_root, work, cfg, names, prev, fix_focal)
+    except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
+        log.warning("incremental mapping from the previous model failed (%s)", exc)
+        models = {}
+    best = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
+    if best is None or best.num_reg_images() < cfg.min_registered_share * len(names):
+        log.warning(
+            "incremental mapping registered %d of %d photos: mapping from scratch",
+            0 if best is None else best.num_reg_images(),
+            len(names),
+        )
+        return {}, "incremental->scratch"
+    return models, "incremental"
+
+
+def _dropped(
+    db_path: Path, names: list[str], ranked: list[pycolmap.Reconstruction], cfg: SfmConfig
+) -> dict[str, str]:
+    """Why each photo is not in the largest model ``ranked[0]``; warns when mapping split."""
+    best = ranked[0]
     kept = {best.image(i).name for i in best.reg_image_ids()}
     others = {r.image(i).name for r in ranked[1:] for i in r.reg_image_ids()} - kept
     dropped = _reasons(db_path, names, kept, others, cfg)
@@ -359,38 +392,57 @@ def map_photos(
             len(ranked),
             "/".join(str(r.num_reg_images()) for r in ranked),
         )
-    if cfg.retriangulate:
-        # Re-triangulate every track from the database with the registered poses:
-        # incremental mapping leaves tracks split and pruned for intermediate geometry (and
-        # a previous round's model keeps its own deformations in its tracks); full tracks
-        # let the final refinement straighten the model (pycolmap's point triangulator).
-        t1 = time.perf_counter()
-        tri_dir = work / "retriangulated"
-        tri_dir.mkdir(parents=True, exist_ok=True)
-        best = pycolmap.triangulate_points(
-            best,
-            str(db_path),
-            str(image_root),
-            str(tri_dir),
-            clear_points=True,
-            options=mapping_options(cfg, names, fix_focal=fix_focal),
-            refine_intrinsics=not fix_focal,
-        )
-        log.info("re-triangulated the model in %.1f s", time.perf_counter() - t1)
-    refinement = {}
-    if cfg.refine_iterations > 0:
-        t1 = time.perf_counter()
-        refinement = robust_refinement(
-            best,
-            cfg.refine_max_error_px,
-            cfg.refine_iterations,
-            cfg.num_threads,
-            relax_first=False,
-            refine_focal_length=not fix_focal,
-            refine_extra_params=cfg.refine_distortion,
-            constant_names=kept_previous,
-        )
-        refinement["seconds"] = time.perf_counter() - t1
-        refinement["fixed_previous_photos"] = len(kept_previous)
-    seconds = time.perf_counter() - t0
-    return MappingResult(best, mode, len(ranked), dropped, seconds, refinement, attempts)
+    return dropped
+
+
+def _retriangulate(
+    best: pycolmap.Reconstruction,
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    cfg: SfmConfig,
+    names: list[str],
+    fix_focal: bool,
+) -> pycolmap.Reconstruction:
+    """The model with every track re-triangulated from the database."""
+    # Re-triangulate every track from the database with the registered poses:
+    # incremental mapping leaves tracks split and pruned for intermediate geometry (and
+    # a previous round's model keeps its own deformations in its tracks); full tracks
+    # let the final refinement straighten the model (pycolmap's point triangulator).
+    t1 = time.perf_counter()
+    tri_dir = work / "retriangulated"
+    tri_dir.mkdir(parents=True, exist_ok=True)
+    best = pycolmap.triangulate_points(
+        best,
+        str(db_path),
+        str(image_root),
+        str(tri_dir),
+        clear_points=True,
+        options=mapping_options(cfg, names, fix_focal=fix_focal),
+        refine_intrinsics=not fix_focal,
+    )
+    log.info("re-triangulated the model in %.1f s", time.perf_counter() - t1)
+    return best
+
+
+def _refine(
+    best: pycolmap.Reconstruction,
+    cfg: SfmConfig,
+    fix_focal: bool,
+    kept_previous: frozenset[str],
+) -> dict:
+    """The final robust refinement of ``best`` (:func:`robust_refinement`); its stats."""
+    t1 = time.perf_counter()
+    refinement = robust_refinement(
+        best,
+        cfg.refine_max_error_px,
+        cfg.refine_iterations,
+        cfg.num_threads,
+        relax_first=False,
+        refine_focal_length=not fix_focal,
+        refine_extra_params=cfg.refine_distortion,
+        constant_names=kept_previous,
+    )
+    refinement["seconds"] = time.perf_counter() - t1
+    refinement["fixed_previous_photos"] = len(kept_previous)
+    return refinement

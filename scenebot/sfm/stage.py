@@ -157,6 +157,13 @@ def _usable_previous(
     return previous
 
 
+def _delete_loose_points(rec: pycolmap.Reconstruction) -> None:
+    """Delete the 3D points seen by fewer than two registered photos."""
+    for pid in list(rec.point3D_ids()):
+        if rec.point3D(pid).track.length() < 2:
+            rec.delete_point3D(pid)
+
+
 def drop_misplaced(
     rec: pycolmap.Reconstruction,
     photos: list[Photo],
@@ -195,9 +202,7 @@ def drop_misplaced(
             rec.deregister_frame(rec.image(iid).frame_id)
             out[p.name] = d
     if out:
-        for pid in list(rec.point3D_ids()):
-            if rec.point3D(pid).track.length() < 2:
-                rec.delete_point3D(pid)
+        _delete_loose_points(rec)
     return out
 
 
@@ -205,7 +210,7 @@ def drop_off_compass(
     rec: pycolmap.Reconstruction,
     photos: list[Photo],
     max_deviation_deg: float,
-    camera_yaw_deg: float = 0.0,
+    camera_yaw_deg: float,
 ) -> dict[str, float]:
     """Deregister photos whose registered heading differs from their compass reading by more
     than ``max_deviation_deg``. The map's x axis is compass heading 0 (a robust fit over all
@@ -239,9 +244,7 @@ def drop_off_compass(
             rec.deregister_frame(rec.image(iid).frame_id)
             out[p.name] = d
     if out:
-        for pid in list(rec.point3D_ids()):
-            if rec.point3D(pid).track.length() < 2:
-                rec.delete_point3D(pid)
+        _delete_loose_points(rec)
     return out
 
 
@@ -257,16 +260,34 @@ def circle_scale_spread(alignment: Alignment) -> float | None:
     return float(np.ptp(scales) / np.mean(scales))
 
 
+@dataclass
+class _Session:
+    """What the steps of one run of the stage share.
+
+    Attributes:
+        cfg: sfm settings.
+        db_path: the scene database; ``work``: its scratch folder (removed at the end).
+        root, photos, names: the photo folder, the photo set and its names.
+        previous: round r-1's model to continue from, or None.
+        fix_focal: focal lengths held at their EXIF value.
+        timings: seconds per step (report.json ``timings_s``).
+    """
+
+    cfg: SfmConfig
+    db_path: Path
+    work: Path
+    root: Path
+    photos: list[Photo]
+    names: list[str]
+    previous: pycolmap.Reconstruction | None = None
+    fix_focal: bool = False
+    timings: dict[str, float] = field(default_factory=dict)
+
+
 def _remap_while_circles_disagree(
-    cfg: SfmConfig,
+    s: _Session,
     mres: MappingResult,
     alignment: Alignment,
-    db_path: Path,
-    root: Path,
-    names: list[str],
-    work: Path,
-    fix_focal: bool,
-    photos: list[Photo],
     known: tuple[str, str, float] | None,
     align_kw: dict,
 ) -> tuple[MappingResult, Alignment, list[dict]]:
@@ -281,6 +302,7 @@ def _remap_while_circles_disagree(
         The kept mapping result and its alignment (model not yet moved), and one record per
         mapping run checked: seed, photos registered, circle scale spread, seconds, kept.
     """
+    cfg = s.cfg
     spread = circle_scale_spread(alignment)
     if spread is None or mres.mode == "incremental":
         return mres, alignment, []
@@ -299,20 +321,15 @@ def _remap_while_circles_disagree(
         if best[0] <= cfg.max_circle_scale_spread:
             break
         seed = cfg.random_seed + cfg.mapping_attempts + k
-        log.warning(
-            "the circles of photos turned in place disagree on the metric scale by %.1f %% "
-            "(sfm.max_circle_scale_spread = %.1f %%): the map is bent; mapping again from "
-            "scratch with seed %d (%d of sfm.scale_remap_attempts = %d)",
-            100 * best[0],
-            100 * cfg.max_circle_scale_spread,
-            seed,
-            k + 1,
-            cfg.scale_remap_attempts,
-        )
+        _log_remap(cfg, best[0], seed, k)
         run_cfg = cfg.model_copy(update={"random_seed": seed, "mapping_attempts": 1})
         try:
-            m2 = map_photos(db_path, root, names, work / f"remap_{k}", run_cfg, fix_focal=fix_focal)
-            a2 = robot_frame_transform(m2.reconstruction, photos, known_distance=known, **align_kw)
+            m2 = map_photos(
+                s.db_path, s.root, s.names, s.work / f"remap_{k}", run_cfg, fix_focal=s.fix_focal
+            )
+            a2 = robot_frame_transform(
+                m2.reconstruction, s.photos, known_distance=known, **align_kw
+            )
         except (SfmError, ValueError) as exc:
             log.warning("mapping again with seed %d failed: %s", seed, exc)
             runs.append({"seed": seed, "failed": str(exc)})
@@ -333,6 +350,20 @@ def _remap_while_circles_disagree(
             100 * best[0],
         )
     return best[1], best[2], runs
+
+
+def _log_remap(cfg: SfmConfig, spread: float, seed: int, k: int) -> None:
+    """Warn that the map is bent and mapping runs again (attempt ``k``, from 0)."""
+    log.warning(
+        "the circles of photos turned in place disagree on the metric scale by %.1f %% "
+        "(sfm.max_circle_scale_spread = %.1f %%): the map is bent; mapping again from "
+        "scratch with seed %d (%d of sfm.scale_remap_attempts = %d)",
+        100 * spread,
+        100 * cfg.max_circle_scale_spread,
+        seed,
+        k + 1,
+        cfg.scale_remap_attempts,
+    )
 
 
 def write_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
@@ -360,6 +391,44 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         SfmError: fewer than ``cfg.min_registered_share`` of the photos registered (named).
     """
     t_start = time.perf_counter()
+    s = _open_session(cfg, inputs)
+    features, pairs = _features_and_pairs(s)
+    s.fix_focal = _focal_fixed(cfg, s.photos)
+    mres = map_photos(
+        s.db_path, s.root, s.names, s.work / "mapping", cfg, s.previous, fix_focal=s.fix_focal
+    )
+    s.timings["map"] = mres.seconds
+    _check_registered(cfg, mres, len(s.photos))
+
+    mres, alignment, scale_checks = _align(s, mres)
+    rec = mres.reconstruction
+    _log_not_in_map(mres.dropped)
+    t = time.perf_counter()
+    align_to_robot_frame(rec, alignment)
+    s.timings["align"] += time.perf_counter() - t
+    _drop_inconsistent_photos(s, rec, alignment, mres.dropped)
+    first = alignment  # the metric scale found on the mapped model (report.json "scale")
+    total_scale = alignment.scale
+    rec, on_circles, circle_stats = _hold_photos_on_circles(s, rec, alignment, mres.mode)
+    if on_circles is not None:
+        alignment = on_circles
+        total_scale *= alignment.scale
+
+    _replace_model(rec, Path(outputs.model_dir))
+    t = time.perf_counter()
+    write_point_descriptors(outputs.descriptors, collect_point_descriptors(rec, s.db_path))
+    s.timings["descriptors"] = time.perf_counter() - t
+    acc = _write_accuracy(cfg, rec, s.photos, outputs)
+    s.timings["total"] = time.perf_counter() - t_start
+    scale = _scale_report(first, total_scale, scale_checks)
+    report = _report(s, rec, mres, features, pairs, circle_stats, scale, alignment, acc)
+    outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
+    shutil.rmtree(s.work, ignore_errors=True)
+    return report
+
+
+def _open_session(cfg: SfmConfig, inputs: SfmInputs) -> _Session:
+    """Read and check the photos and the previous round's model (if usable)."""
     timings: dict[str, float] = {}
     if inputs.photo_folder is not None:
         root, photos = photos_from_folder(inputs.photo_folder)
@@ -372,26 +441,48 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     timings["check_photos"] = time.perf_counter() - t
 
     db_path = Path(inputs.database)
-    work = db_path.parent / "work"
-    previous = None
-    if inputs.previous_model is not None:
-        prev_dir = Path(inputs.previous_model)
-        if not all((prev_dir / f).is_file() for f in MODEL_FILES):
-            raise SfmError(
-                f"previous model {prev_dir} has no COLMAP model ({', '.join(MODEL_FILES)})"
-            )
-        previous = pycolmap.Reconstruction(str(prev_dir))
-
+    previous = _read_previous(inputs.previous_model)
     if check_database_photos(db_path, photos) and previous is not None:
-        log.warning("database reset: mapping from scratch instead of from %s", prev_dir)
+        log.warning(
+            "database reset: mapping from scratch instead of from %s",
+            Path(inputs.previous_model),
+        )
         previous = None
-    previous = _usable_previous(previous, db_path)
-    ext = extract(db_path, root, photos, cfg)
-    timings["extract"] = ext["seconds"]
+    return _Session(
+        cfg,
+        db_path,
+        db_path.parent / "work",
+        root,
+        photos,
+        [p.name for p in photos],
+        previous=_usable_previous(previous, db_path),
+        timings=timings,
+    )
+
+
+def _read_previous(previous_model: Path | None) -> pycolmap.Reconstruction | None:
+    """Round r-1's model from its folder (None: none given); SfmError without model files."""
+    if previous_model is None:
+        return None
+    prev_dir = Path(previous_model)
+    if not all((prev_dir / f).is_file() for f in MODEL_FILES):
+        raise SfmError(f"previous model {prev_dir} has no COLMAP model ({', '.join(MODEL_FILES)})")
+    return pycolmap.Reconstruction(str(prev_dir))
+
+
+def _features_and_pairs(s: _Session) -> tuple[dict, dict]:
+    """Extract the new photos' features, select pairs and match the new ones.
+
+    Returns:
+        report.json's ``features`` (photo counts) and ``pairs`` (pair counts per kind).
+    """
+    cfg = s.cfg
+    ext = extract(s.db_path, s.root, s.photos, cfg)
+    s.timings["extract"] = ext["seconds"]
     log.info("features: %d new photos, %d reused", ext["new"], ext["reused"])
 
     pairs = select_pairs(
-        _priors(photos, previous),
+        _priors(s.photos, s.previous),
         exhaustive_max_images=cfg.exhaustive_max_images,
         spatial_neighbors=cfg.spatial_neighbors,
         spatial_max_distance_m=cfg.spatial_max_distance_m,
@@ -399,11 +490,16 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         loop_closure_pairs=cfg.loop_closure_pairs,
     )
     all_pairs = sorted(set().union(*pairs.values()))
-    mt = match_pairs(db_path, all_pairs, cfg, work)
-    timings["match"] = mt["seconds"]
+    mt = match_pairs(s.db_path, all_pairs, cfg, s.work)
+    s.timings["match"] = mt["seconds"]
     log.info("pairs: %d selected, %d newly matched", len(all_pairs), mt["new"])
+    features = {k: ext[k] for k in ("new", "reused", "no_features")}
+    return features, {k: len(v) for k, v in pairs.items()} | {"matched_now": mt["new"]}
 
-    names = [p.name for p in photos]
+
+def _focal_fixed(cfg: SfmConfig, photos: list[Photo]) -> bool:
+    """Whether the focal length stays at its EXIF value (``cfg.fix_exif_focal`` and every
+    photo's EXIF gives the sensor-exact focal length); logs when it is refined instead."""
     fix_focal = cfg.fix_exif_focal and all(p.focal_source == "exif_focal_plane" for p in photos)
     if cfg.fix_exif_focal and not fix_focal:
         log.info(
@@ -411,22 +507,27 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             "FocalLength and FocalPlaneResolution (sources: %s)",
             ", ".join(sorted({p.focal_source for p in photos})),
         )
-    mres = map_photos(db_path, root, names, work / "mapping", cfg, previous, fix_focal=fix_focal)
-    timings["map"] = mres.seconds
+    return fix_focal
+
+
+def _check_registered(cfg: SfmConfig, mres: MappingResult, n_photos: int) -> None:
+    """SfmError naming the dropped photos when fewer than ``cfg.min_registered_share`` of
+    the ``n_photos`` photos (or fewer than 3) registered."""
     n_reg = mres.reconstruction.num_reg_images()
-    if n_reg < cfg.min_registered_share * len(photos) or n_reg < 3:
+    if n_reg < cfg.min_registered_share * n_photos or n_reg < 3:
         listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
         raise SfmError(
-            f"only {n_reg} of {len(photos)} photos registered (sfm.min_registered_share = "
+            f"only {n_reg} of {n_photos} photos registered (sfm.min_registered_share = "
             f"{cfg.min_registered_share}; best of {max(mres.attempts, 1)} run(s), "
             f"sfm.mapping_attempts). Dropped photos:\n  {listing}\n"
             "Photos need overlap (neighbouring views sharing >= 1/3 of the scene) and "
             "texture; add photos between the dropped ones or lower sfm.min_registered_share."
         )
 
-    t = time.perf_counter()
-    kd = cfg.known_distance
-    align_kw = {
+
+def _align_settings(cfg: SfmConfig, previous: pycolmap.Reconstruction | None) -> dict:
+    """Keyword arguments of :func:`robot_frame_transform` from the settings."""
+    return {
         "camera_yaw_deg": cfg.camera_yaw_deg,
         "use_compass": cfg.use_compass,
         "min_odometry_pairs": cfg.min_odometry_pairs,
@@ -435,24 +536,45 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         "min_circle_photos": cfg.min_circle_photos,
         "max_circle_residual": cfg.max_circle_residual,
     }
+
+
+def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, list[dict]]:
+    """The robot-frame alignment of the mapped model, mapping again while its circles
+    disagree on the scale (:func:`_remap_while_circles_disagree`; model not yet moved)."""
+    t = time.perf_counter()
+    kd = s.cfg.known_distance
+    align_kw = _align_settings(s.cfg, s.previous)
     known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
-    alignment = robot_frame_transform(mres.reconstruction, photos, known_distance=known, **align_kw)
-    timings["align"] = time.perf_counter() - t
-    mres, alignment, scale_checks = _remap_while_circles_disagree(
-        cfg, mres, alignment, db_path, root, names, work, fix_focal, photos, known, align_kw
+    alignment = robot_frame_transform(
+        mres.reconstruction, s.photos, known_distance=known, **align_kw
     )
-    rec = mres.reconstruction
-    timings["map"] += sum(c.get("seconds", 0.0) for c in scale_checks[1:])
-    if mres.dropped:
+    s.timings["align"] = time.perf_counter() - t
+    mres, alignment, scale_checks = _remap_while_circles_disagree(
+        s, mres, alignment, known, align_kw
+    )
+    s.timings["map"] += sum(c.get("seconds", 0.0) for c in scale_checks[1:])
+    return mres, alignment, scale_checks
+
+
+def _log_not_in_map(dropped: dict[str, str]) -> None:
+    """Warn about the photos mapping left out, with reasons."""
+    if dropped:
         log.warning(
             "%d photo(s) not in the map: %s",
-            len(mres.dropped),
-            "; ".join(f"{n} ({why})" for n, why in mres.dropped.items()),
+            len(dropped),
+            "; ".join(f"{n} ({why})" for n, why in dropped.items()),
         )
-    t = time.perf_counter()
-    align_to_robot_frame(rec, alignment)
-    timings["align"] += time.perf_counter() - t
-    misplaced = drop_misplaced(rec, photos, alignment.camera_offset_m, cfg.max_estimate_deviation_m)
+
+
+def _drop_inconsistent_photos(
+    s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, dropped: dict[str, str]
+) -> None:
+    """Take photos registered far from the robot's own estimate or off their compass
+    reading out of ``rec`` (aligned), logged and added to ``dropped`` with reasons."""
+    cfg = s.cfg
+    misplaced = drop_misplaced(
+        rec, s.photos, alignment.camera_offset_m, cfg.max_estimate_deviation_m
+    )
     if misplaced:
         log.warning(
             "%d photo(s) registered far from where the robot estimated it took them "
@@ -461,11 +583,11 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
             cfg.max_estimate_deviation_m,
             ", ".join(f"{n} ({d:.2f} m)" for n, d in misplaced.items()),
         )
-        mres.dropped.update(
+        dropped.update(
             {n: f"registered {d:.2f} m from the robot's own estimate" for n, d in misplaced.items()}
         )
     if cfg.use_compass:
-        turned = drop_off_compass(rec, photos, cfg.max_compass_deviation_deg, cfg.camera_yaw_deg)
+        turned = drop_off_compass(rec, s.photos, cfg.max_compass_deviation_deg, cfg.camera_yaw_deg)
         if turned:
             log.warning(
                 "%d photo(s) registered with a heading far from their compass reading "
@@ -474,55 +596,69 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
                 cfg.max_compass_deviation_deg,
                 ", ".join(f"{n} ({d:.0f} deg)" for n, d in turned.items()),
             )
-            mres.dropped.update(
+            dropped.update(
                 {n: f"registered {d:.0f} deg off its compass reading" for n, d in turned.items()}
             )
-    first = alignment  # the metric scale found on the mapped model (report.json "scale")
-    total_scale = alignment.scale
 
+
+def _hold_photos_on_circles(
+    s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, mode: str
+) -> tuple[pycolmap.Reconstruction, Alignment | None, dict]:
+    """With the lever-arm scale and ``cfg.circle_prior_std_m``: repair and adjust the
+    turn-in-place circles (:func:`repair_circles`) and align the result again.
+
+    Returns:
+        The model (aligned), the new alignment (None when not run) and the circle stats.
+    """
+    cfg = s.cfg
     kept_previous: frozenset[str] = frozenset()
-    if mres.mode == "incremental" and cfg.update_keep_previous_poses and previous is not None:
-        kept_previous = frozenset(previous.image(i).name for i in previous.reg_image_ids())
-    circle_stats: dict = {}
-    if (
+    if mode == "incremental" and cfg.update_keep_previous_poses and s.previous is not None:
+        kept_previous = frozenset(s.previous.image(i).name for i in s.previous.reg_image_ids())
+    if not (
         cfg.camera_offset_m is not None
         and cfg.circle_prior_std_m > 0
         and alignment.scale_source == "camera_lever_arm"
     ):
-        t = time.perf_counter()
-        rec, circle_stats = repair_circles(
-            rec,
-            photos,
-            alignment.camera_offset_m,
-            db_path,
-            root,
-            work / "circles",
-            triangulation_options=mapping_options(cfg, names, fix_focal=fix_focal),
-            max_residual_m=cfg.circle_max_residual_m,
-            prior_std_m=cfg.circle_prior_std_m,
-            iterations=cfg.circle_prior_iterations,
-            min_photos=cfg.min_circle_photos,
-            camera_yaw_deg=cfg.camera_yaw_deg,
-            max_error_px=cfg.refine_max_error_px,
-            refine_focal_length=not fix_focal,
-            refine_extra_params=cfg.refine_distortion,
-            num_threads=cfg.num_threads,
-            constant_names=kept_previous,
-        )
-        alignment = robot_frame_transform(rec, photos, **align_kw)
-        align_to_robot_frame(rec, alignment)
-        total_scale *= alignment.scale
-        timings["circle_priors"] = time.perf_counter() - t
+        return rec, None, {}
+    t = time.perf_counter()
+    rec, circle_stats = repair_circles(
+        rec,
+        s.photos,
+        alignment.camera_offset_m,
+        s.db_path,
+        s.root,
+        s.work / "circles",
+        triangulation_options=mapping_options(cfg, s.names, fix_focal=s.fix_focal),
+        max_residual_m=cfg.circle_max_residual_m,
+        prior_std_m=cfg.circle_prior_std_m,
+        iterations=cfg.circle_prior_iterations,
+        min_photos=cfg.min_circle_photos,
+        camera_yaw_deg=cfg.camera_yaw_deg,
+        max_error_px=cfg.refine_max_error_px,
+        refine_focal_length=not s.fix_focal,
+        refine_extra_params=cfg.refine_distortion,
+        num_threads=cfg.num_threads,
+        constant_names=kept_previous,
+    )
+    alignment = robot_frame_transform(rec, s.photos, **_align_settings(cfg, s.previous))
+    align_to_robot_frame(rec, alignment)
+    s.timings["circle_priors"] = time.perf_counter() - t
+    return rec, alignment, circle_stats
 
-    model_dir = Path(outputs.model_dir)
+
+def _replace_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
+    """Write ``rec`` into ``model_dir``, removing an earlier run's model files first."""
     if model_dir.exists():
         for f in model_dir.glob("*.bin"):
             f.unlink()
     write_model(rec, model_dir)
-    t = time.perf_counter()
-    write_point_descriptors(outputs.descriptors, collect_point_descriptors(rec, db_path))
-    timings["descriptors"] = time.perf_counter() - t
 
+
+def _write_accuracy(
+    cfg: SfmConfig, rec: pycolmap.Reconstruction, photos: list[Photo], outputs: SfmOutputs
+) -> dict:
+    """Evaluate against the logged true poses (if any) into ``accuracy.json``, and write the
+    plots (``cfg.plots``). Returns the accuracy."""
     truths = {p.name: p.truth for p in photos if p.truth}
     acc = (
         evaluate_accuracy(rec, truths)
@@ -535,9 +671,23 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
 
         plot_map(rec, outputs.map_png)
         plot_accuracy_histograms(acc, outputs.accuracy_png)
-    timings["total"] = time.perf_counter() - t_start
-    report = {
-        "photos": len(photos),
+    return acc
+
+
+def _report(
+    s: _Session,
+    rec: pycolmap.Reconstruction,
+    mres: MappingResult,
+    features: dict,
+    pairs: dict,
+    circle_stats: dict,
+    scale: dict,
+    alignment: Alignment,
+    acc: dict,
+) -> dict:
+    """The content of report.json (see :func:`run`)."""
+    return {
+        "photos": len(s.photos),
         "registered": rec.num_reg_images(),
         "points3D": rec.num_points3D(),
         "mean_reprojection_error_px": rec.compute_mean_reprojection_error(),
@@ -547,41 +697,49 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         "circle_priors": circle_stats,
         "models": mres.num_models,
         "dropped": mres.dropped,
-        "features": {k: ext[k] for k in ("new", "reused", "no_features")},
-        "pairs": {k: len(v) for k, v in pairs.items()} | {"matched_now": mt["new"]},
+        "features": features,
+        "pairs": pairs,
         "cameras": [
             {"camera_id": c.camera_id, "model": c.model_name, "params": list(c.params)}
             for c in rec.cameras.values()
         ],
-        "focal_sources": sorted({p.focal_source for p in photos}),
-        "focal_fixed": fix_focal,
-        "scale": {
-            "source": first.scale_source,
-            "m_per_sfm_unit": total_scale,
-            "from_camera_lever_arm": first.stats.get("scale_circles"),
-            "from_odometry": first.stats.get("scale_odometry"),
-            "odometry_vs_lever_arm": first.stats.get("scale_odometry_vs_circles"),
-            "circles_used": first.stats.get("circles_used", 0),
-            "circles": first.stats.get("circles", []),
-            "circle_scale_spread": circle_scale_spread(first),
-            "mapping_runs_checked": scale_checks,
-        },
+        "focal_sources": sorted({p.focal_source for p in s.photos}),
+        "focal_fixed": s.fix_focal,
+        "scale": scale,
         "alignment": alignment.as_dict(),
-        "timings_s": timings,
-        "accuracy": {
-            k: acc[k]
-            for k in (
-                "metric_scale_error",
-                "position_error_m",
-                "heading_error_deg",
-                "frame_tilt_deg",
-            )
-            if k in acc
-        },
+        "timings_s": s.timings,
+        "accuracy": _accuracy_summary(acc),
     }
-    outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
-    shutil.rmtree(work, ignore_errors=True)
-    return report
+
+
+def _scale_report(first: Alignment, total_scale: float, scale_checks: list[dict]) -> dict:
+    """report.json's ``scale``: the scale found on the mapped model (``first``) and the
+    total scale applied."""
+    return {
+        "source": first.scale_source,
+        "m_per_sfm_unit": total_scale,
+        "from_camera_lever_arm": first.stats.get("scale_circles"),
+        "from_odometry": first.stats.get("scale_odometry"),
+        "odometry_vs_lever_arm": first.stats.get("scale_odometry_vs_circles"),
+        "circles_used": first.stats.get("circles_used", 0),
+        "circles": first.stats.get("circles", []),
+        "circle_scale_spread": circle_scale_spread(first),
+        "mapping_runs_checked": scale_checks,
+    }
+
+
+def _accuracy_summary(acc: dict) -> dict:
+    """report.json's ``accuracy``: the headline figures of ``accuracy.json``."""
+    return {
+        k: acc[k]
+        for k in (
+            "metric_scale_error",
+            "position_error_m",
+            "heading_error_deg",
+            "frame_tilt_deg",
+        )
+        if k in acc
+    }
 
 
 def _json_default(o):

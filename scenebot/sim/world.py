@@ -48,7 +48,7 @@ class SimWorld:
         scene: the world geometry.
         cfg: simulator settings.
         start: true start pose (world frame).
-        seed: seed of all noise (slip, sensors, image noise).
+        seed: seed of all noise (slip, sensors, image noise; the config's ``seed``).
         renderer: an existing renderer of ``scene`` to share (optional).
     """
 
@@ -57,7 +57,7 @@ class SimWorld:
         scene: SceneMesh,
         cfg: SimConfig,
         start: Pose2D,
-        seed: int = 0,
+        seed: int,
         renderer: Renderer | None = None,
     ):
         self.scene = scene

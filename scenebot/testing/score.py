@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenebot.score.geometry import Intrinsics, planar_cam_from_world
+from scenebot.geometry import Intrinsics, planar_cam_from_world
 
 
 def grid_quad(origin: np.ndarray, u: np.ndarray, v: np.ndarray, nu: int, nv: int):
@@ -285,17 +285,28 @@ def scorers(
         height: candidate render height (pixels).
         depth_width: source depth-map width (pixels).
         which: ``"taichi"``, ``"reference"`` or ``"both"``.
-        **kw: more keyword arguments for the taichi scorer (batch_size, backend, tiles).
+        **kw: more keyword arguments for the taichi scorer (depth_tolerance, near_m,
+            batch_size, backend, tile_px, per_view); the settings not given are
+            :class:`~scenebot.score.config.ScoreConfig`'s.
 
     Returns:
         The scorer, or a (taichi, reference) tuple for ``"both"``.
     """
+    from scenebot.score.config import ScoreConfig
     from scenebot.score.kernel import TaichiScorer, source_views_for_depth
     from scenebot.score.reference import ReferenceScorer
 
     K = default_intrinsics()
     sv, size = source_views_for_depth(R, t, [K] * len(R), depth_width)
     intr = K.scaled(width, height)
+    cfg = ScoreConfig()
+    kw = {
+        "depth_tolerance": cfg.depth_tolerance,
+        "near_m": cfg.near_m,
+        "batch_size": cfg.batch_size,
+        "backend": cfg.backend,
+        **kw,
+    }
     common = {k: v for k, v in kw.items() if k in ("depth_tolerance", "near_m")}
     out = []
     if which in ("taichi", "both"):

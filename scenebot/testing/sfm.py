@@ -146,6 +146,92 @@ def circle_spots(room: SyntheticRoom, n_spots: int, rng: np.random.Generator) ->
     return pts + rng.normal(0, 0.1, pts.shape)
 
 
+@dataclass
+class _Robot:
+    """The robot's true pose and its odometry (x, y, theta; m, rad), which integrates encoder
+    distances with a relative error ``odometry_noise`` and turns with a relative slip
+    ``turn_slip`` (noise drawn from ``rng``)."""
+
+    true: np.ndarray
+    odo: np.ndarray
+    rng: np.random.Generator
+    turn_slip: float
+    odometry_noise: float
+
+    def turn(self, angle: float) -> None:
+        """Turn in place by ``angle`` (rad); odometry under-reads it by the slip."""
+        slip = self.turn_slip * self.rng.uniform(0.5, 1.5)
+        self.true[2] = (self.true[2] + angle) % (2 * math.pi)
+        self.odo[2] = (self.odo[2] + angle * (1.0 - slip)) % (2 * math.pi)
+
+    def drive(self, dist: float) -> None:
+        """Drive ``dist`` (m) straight ahead; odometry reads it with noise."""
+        true, odo = self.true, self.odo
+        true[:2] += dist * np.array([math.cos(true[2]), math.sin(true[2])])
+        d_odo = dist * (1.0 + self.rng.normal(0, self.odometry_noise))
+        odo[:2] += d_odo * np.array([math.cos(odo[2]), math.sin(odo[2])])
+
+    def go_to(self, spot: np.ndarray) -> None:
+        """Turn towards ``spot`` (m) and drive there."""
+        delta = spot - self.true[:2]
+        heading = math.atan2(delta[1], delta[0])
+        self.turn((heading - self.true[2] + math.pi) % (2 * math.pi) - math.pi)
+        self.drive(float(np.linalg.norm(delta)))
+
+
+def _session_record(room: SyntheticRoom, round_index: int) -> dict:
+    """The capture log's first record: robot, scene, round and camera."""
+    return {
+        "type": "session",
+        "robot": "synthetic",
+        "scene": "synthetic_room",
+        "round": round_index,
+        "camera": {
+            "width": room.width,
+            "height": room.height,
+            "focal_px": room.focal_px,
+            "model": "PINHOLE",
+        },
+    }
+
+
+def _take_photo(
+    out_dir: Path,
+    room: SyntheticRoom,
+    robot: _Robot,
+    round_index: int,
+    idx: int,
+    t: float,
+    compass_noise_deg: float,
+    exif_focal: bool,
+) -> dict:
+    """Render and write photo ``idx`` at the robot's true pose; its log record (noisy
+    compass, odometry, truth)."""
+    true, odo = robot.true, robot.odo
+    R, c = room.cam_from_world(*true)
+    name = f"images/r{round_index:03d}_{idx:04d}.jpg"
+    write_jpeg_with_exif(out_dir / name, room.render(R, c), room.focal_px if exif_focal else None)
+    compass = (
+        math.degrees(true[2]) + room.compass_offset_deg + robot.rng.normal(0, compass_noise_deg)
+    ) % 360.0
+    return {
+        "type": "photo",
+        "t": t,
+        "index": idx,
+        "image": name,
+        "odometry": {"x": odo[0], "y": odo[1], "theta": odo[2]},
+        "compass_deg": compass,
+        "ultrasonic_cm": 255,
+        "bump_front": False,
+        "bump_rear": False,
+        "truth": {
+            "robot": {"x": true[0], "y": true[1], "theta": true[2]},
+            "center": c.tolist(),
+            "R_cam_from_world": R.reshape(-1).tolist(),
+        },
+    }
+
+
 def make_capture(
     out_dir: Path,
     room: SyntheticRoom | None = None,
@@ -189,6 +275,7 @@ def make_capture(
     true = np.array([spots[0][0], spots[0][1], rng.uniform(0, 2 * math.pi)])
     compass0 = (math.degrees(true[2]) + room.compass_offset_deg) % 360.0
     odo = np.array([0.0, 0.0, math.radians(compass0)])
+    robot = _Robot(true, odo, rng, turn_slip, odometry_noise)
     records: list[dict] = []
     t = 0.0
     idx = 0
@@ -196,68 +283,19 @@ def make_capture(
     if log_path.exists():
         log_path.unlink()
     with CaptureLog(log_path) as log:
-        log.write(
-            {
-                "type": "session",
-                "robot": "synthetic",
-                "scene": "synthetic_room",
-                "round": round_index,
-                "camera": {
-                    "width": room.width,
-                    "height": room.height,
-                    "focal_px": room.focal_px,
-                    "model": "PINHOLE",
-                },
-            }
-        )
-
-        def turn(angle: float) -> None:
-            true[2] = (true[2] + angle) % (2 * math.pi)
-            odo[2] = (odo[2] + angle * (1.0 - turn_slip * rng.uniform(0.5, 1.5))) % (2 * math.pi)
-
-        def drive(dist: float) -> None:
-            true[:2] += dist * np.array([math.cos(true[2]), math.sin(true[2])])
-            d_odo = dist * (1.0 + rng.normal(0, odometry_noise))
-            odo[:2] += d_odo * np.array([math.cos(odo[2]), math.sin(odo[2])])
-
+        log.write(_session_record(room, round_index))
         for k in range(len(spots)):
             for _ in range(photos_per_circle):
-                R, c = room.cam_from_world(*true)
-                name = f"images/r{round_index:03d}_{idx:04d}.jpg"
-                write_jpeg_with_exif(
-                    out_dir / name, room.render(R, c), room.focal_px if exif_focal else None
+                rec = _take_photo(
+                    out_dir, room, robot, round_index, idx, t, compass_noise_deg, exif_focal
                 )
-                compass = (
-                    math.degrees(true[2])
-                    + room.compass_offset_deg
-                    + rng.normal(0, compass_noise_deg)
-                ) % 360.0
-                rec = {
-                    "type": "photo",
-                    "t": t,
-                    "index": idx,
-                    "image": name,
-                    "odometry": {"x": odo[0], "y": odo[1], "theta": odo[2]},
-                    "compass_deg": compass,
-                    "ultrasonic_cm": 255,
-                    "bump_front": False,
-                    "bump_rear": False,
-                    "truth": {
-                        "robot": {"x": true[0], "y": true[1], "theta": true[2]},
-                        "center": c.tolist(),
-                        "R_cam_from_world": R.reshape(-1).tolist(),
-                    },
-                }
                 log.write(rec)
                 records.append(rec)
                 idx += 1
                 t += 2.0
-                turn(2 * math.pi / photos_per_circle)
+                robot.turn(2 * math.pi / photos_per_circle)
             if k + 1 < len(spots):
-                delta = spots[k + 1] - true[:2]
-                heading = math.atan2(delta[1], delta[0])
-                turn((heading - true[2] + math.pi) % (2 * math.pi) - math.pi)
-                drive(float(np.linalg.norm(delta)))
+                robot.go_to(spots[k + 1])
                 t += 5.0
         log.write({"type": "end", "t": t, "photos": idx, "reason": "done"})
     return records

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from scenebot.settings import Settings
 
 
-class ProxyConfig(BaseModel):
+class ProxyConfig(Settings):
     """The geometric proxy: the dense cloud splatted into a view, holes filled."""
-
-    model_config = ConfigDict(extra="forbid")
 
     min_points: int = Field(
         500, ge=10, description="Fewer finite points than this in the dense cloud is an error."
@@ -78,10 +78,8 @@ class ProxyConfig(BaseModel):
     near_m: float = Field(0.05, gt=0, description="Near clipping distance, metres.")
 
 
-class UlrConfig(BaseModel):
+class UlrConfig(Settings):
     """Unstructured lumigraph blending (Buehler et al. 2001)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     k: int = Field(4, ge=1, le=8, description="Sources blended per pixel (count).")
     angle_weight: float = Field(
@@ -135,10 +133,8 @@ class UlrConfig(BaseModel):
     )
 
 
-class PathConfig(BaseModel):
+class PathConfig(Settings):
     """The tour path: a smooth closed spline at camera height through the free space."""
-
-    model_config = ConfigDict(extra="forbid")
 
     frames: int = Field(300, ge=2, description="Frames of the tour (count).")
     cluster_radius_m: float = Field(
@@ -193,10 +189,8 @@ class PathConfig(BaseModel):
     )
 
 
-class ViewerConfig(BaseModel):
+class ViewerConfig(Settings):
     """The static web viewer."""
-
-    model_config = ConfigDict(extra="forbid")
 
     viewpoints: int = Field(
         12, ge=1, description="Clickable viewpoints on the overview map (count)."
@@ -213,10 +207,8 @@ class ViewerConfig(BaseModel):
     )
 
 
-class TourConfig(BaseModel):
+class TourConfig(Settings):
     """Settings of the tour stage: proxy, ULR renderer, tour path, video and viewer."""
-
-    model_config = ConfigDict(extra="forbid")
 
     width: int = Field(640, ge=16, description="Width of the tour frames, pixels.")
     height: int = Field(480, ge=16, description="Height of the tour frames, pixels.")

@@ -77,14 +77,17 @@ class ClearanceChecker:
 
     Args:
         points: (N, 3) dense cloud, metres.
-        clearance_m: horizontal distance to keep from points in the camera's height band.
+        clearance_m: horizontal distance to keep from points in the camera's height band
+            (``tour.path.clearance_m``).
         height: camera height (z of the camera plane), metres.
-        band_m: half height of the band of points that count as obstacles, metres.
+        band_m: half height of the band of points that count as obstacles, metres
+            (``tour.path.height_band_m``).
         freespace: optional callable (K, 2) xy -> (K,) bool.
-        min_points: points within the clearance that make an obstacle (count).
+        min_points: points within the clearance that make an obstacle (count;
+            ``tour.path.obstacle_min_points``).
     """
 
-    def __init__(self, points, clearance_m, height=0.0, band_m=0.3, freespace=None, min_points=20):
+    def __init__(self, points, clearance_m, height, band_m, freespace=None, *, min_points):
         pts = np.asarray(points, np.float64)
         near = pts[np.abs(pts[:, 2] - height) < band_m]
         self.tree = cKDTree(near[:, :2]) if len(near) else None

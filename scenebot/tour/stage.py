@@ -80,7 +80,7 @@ def build_renderer(cfg: TourConfig, inputs: TourInputs):
     """
     import pycolmap
 
-    from scenebot.tour._ti import init_taichi
+    from scenebot.taichi_setup import init_taichi
     from scenebot.tour.proxy import load_proxy
     from scenebot.tour.ulr import UlrRenderer, load_sources
 
@@ -96,7 +96,7 @@ def build_renderer(cfg: TourConfig, inputs: TourInputs):
 def _freespace_test(npz: Path | None):
     if npz is None or not Path(npz).is_file():
         return None
-    from scenebot.score.freespace import FreeSpace
+    from scenebot.artifacts.freespace import FreeSpace
 
     fs = FreeSpace.load(npz)
     return fs.contains
@@ -118,7 +118,7 @@ def plan_valid_path(cfg: TourConfig, renderer, freespace_npz: Path | None = None
         float(np.median(centers[:, 2])),
         cfg.path.height_band_m,
         fs,
-        cfg.path.obstacle_min_points,
+        min_points=cfg.path.obstacle_min_points,
     )
     first = renderer.sources[0].R[2]
     path = plan_tour(centers, cfg.path, checker, float(np.arctan2(first[1], first[0])))

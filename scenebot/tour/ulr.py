@@ -96,6 +96,204 @@ def load_sources(rec, image_dir: str | Path) -> list[SourceView]:
 
 
 # --------------------------------------------------------------------------- taichi kernel
+# The kernel's parameter vector ``prm``: the penalty weights a (angle), b (resolution) and
+# g (field of view), border_px, vis_tol, eps and near, at these indices.
+_A, _B, _G, _BORDER, _VIS_TOL, _EPS, _NEAR = range(7)
+
+
+@ti.func
+def _novel_centre(pose: ti.template()):
+    """The novel camera's centre ``C = -R^T t`` (``pose`` (3, 4) = [R | t])."""
+    C = ti.math.vec3(0.0, 0.0, 0.0)
+    for c in ti.static(range(3)):
+        C[c] = -(pose[0, c] * pose[0, 3] + pose[1, c] * pose[1, 3] + pose[2, c] * pose[2, 3])
+    return C
+
+
+@ti.func
+def _pixel_point(rays: ti.template(), pose: ti.template(), C, i, j, z):
+    """The world point of pixel (i, j) at z-depth ``z``: ``C + R^T (z * ray)``."""
+    xc = ti.math.vec3(rays[i, j, 0] * z, rays[i, j, 1] * z, z)
+    P = ti.math.vec3(0.0, 0.0, 0.0)
+    for c in ti.static(range(3)):
+        P[c] = C[c] + pose[0, c] * xc[0] + pose[1, c] * xc[1] + pose[2, c] * xc[2]
+    return P
+
+
+@ti.func
+def _in_source(s_pose: ti.template(), s, P):
+    """World point ``P`` in source ``s``'s camera frame: ``R_s P + t_s``."""
+    q = ti.math.vec3(0.0, 0.0, 0.0)
+    for r in ti.static(range(3)):
+        q[r] = (
+            s_pose[s, r, 0] * P[0]
+            + s_pose[s, r, 1] * P[1]
+            + s_pose[s, r, 2] * P[2]
+            + s_pose[s, r, 3]
+        )
+    return q
+
+
+@ti.func
+def _border_distance(uv, s_cam: ti.template(), s):
+    """Distance (pixels) of ``uv`` from the nearest border of source ``s``'s image."""
+    sw = s_cam[s, 8]
+    sh = s_cam[s, 9]
+    return ti.min(ti.min(uv[0], sw - uv[0]), ti.min(uv[1], sh - uv[1]))
+
+
+@ti.func
+def _penalty(P, dT, lenT, s_pose: ti.template(), s, dist_b, prm: ti.template()):
+    """The ULR penalty of source ``s`` for ``P``: a * angle + b * resolution loss + g * fov.
+
+    ``dT = P - C`` is the novel ray, ``lenT`` its length, ``dist_b`` the distance of ``P``'s
+    projection from the source's image border (pixels).
+    """
+    dS = P - ti.math.vec3(s_pose[s, 0, 4], s_pose[s, 1, 4], s_pose[s, 2, 4])
+    lenS = dS.norm() + 1e-9
+    cosang = ti.min(ti.max(dS.dot(dT) / (lenS * lenT), -1.0), 1.0)
+    pen = prm[_A] * ti.acos(cosang)
+    pen += prm[_B] * ti.max(0.0, lenS - lenT) / lenT
+    pen += prm[_G] * ti.max(0.0, 1.0 - dist_b / prm[_BORDER])
+    return pen
+
+
+@ti.func
+def _unoccluded(s_vis: ti.template(), s_vscale: ti.template(), s, uv, zs, vis_tol):
+    """Whether source ``s`` sees the point at its depth ``zs`` and pixel ``uv``: not farther
+    than the proxy depth rendered into the source there (tolerance ``vis_tol``)."""
+    vx = ti.min(int(uv[0] * s_vscale[s, 0]), s_vis.shape[2] - 1)
+    vy = ti.min(int(uv[1] * s_vscale[s, 1]), s_vis.shape[1] - 1)
+    dvis = s_vis[s, vy, vx]
+    return zs <= dvis * (1.0 + vis_tol)
+
+
+@ti.func
+def _bilinear(s_img: ti.template(), s_cam: ti.template(), s, u, v):
+    """Source ``s``'s colour at pixel coordinates (u, v), bilinear, clamped to the image."""
+    x = u - 0.5
+    y = v - 0.5
+    x0 = ti.min(ti.max(int(ti.floor(x)), 0), int(s_cam[s, 8]) - 1)
+    y0 = ti.min(ti.max(int(ti.floor(y)), 0), int(s_cam[s, 9]) - 1)
+    x1 = ti.min(x0 + 1, int(s_cam[s, 8]) - 1)
+    y1 = ti.min(y0 + 1, int(s_cam[s, 9]) - 1)
+    fx = ti.min(ti.max(x - x0, 0.0), 1.0)
+    fy = ti.min(ti.max(y - y0, 0.0), 1.0)
+    col = ti.math.vec3(0.0, 0.0, 0.0)
+    for c in ti.static(range(3)):
+        top = (1 - fx) * ti.cast(s_img[s, y0, x0, c], ti.f32) + fx * ti.cast(
+            s_img[s, y0, x1, c], ti.f32
+        )
+        bot = (1 - fx) * ti.cast(s_img[s, y1, x0, c], ti.f32) + fx * ti.cast(
+            s_img[s, y1, x1, c], ti.f32
+        )
+        col[c] = (1 - fy) * top + fy * bot
+    return col
+
+
+# The best sources of a pixel are kept in four lists of a fixed length ``kk`` (k + 1, unrolled
+# at compile time), sorted by penalty: ``bp`` (penalty), ``bi`` (source, -1: empty), ``bu``
+# and ``bv`` (the pixel in the source).
+
+
+@ti.func
+def _insert_best(bp: ti.template(), bi: ti.template(), bu: ti.template(), bv: ti.template(),
+                 pen, s, u, v, kk: ti.template()):  # fmt: skip
+    """Insert source ``s`` (penalty ``pen``, pixel (u, v)) into the sorted lists; the worst
+    one drops out."""
+    cp = pen
+    ci = s
+    cu = u
+    cv = v
+    for m in ti.static(range(kk)):
+        if cp < bp[m]:
+            tp = bp[m]
+            tq = bi[m]
+            tu = bu[m]
+            tv = bv[m]
+            bp[m] = cp
+            bi[m] = ci
+            bu[m] = cu
+            bv[m] = cv
+            cp = tp
+            ci = tq
+            cu = tu
+            cv = tv
+
+
+@ti.func
+def _rank_sources(P, C, s_pose: ti.template(), s_cam: ti.template(), s_on: ti.template(),
+                  s_vis: ti.template(), s_vscale: ti.template(), prm: ti.template(),
+                  bp: ti.template(), bi: ti.template(), bu: ti.template(), bv: ti.template(),
+                  kk: ti.template()):  # fmt: skip
+    """Fill the lists with the enabled sources that see ``P`` (novel centre ``C``)
+    unoccluded, best first; if none does, the source with the lowest penalty anyway."""
+    dT = P - C
+    lenT = dT.norm() + 1e-9
+    any_p = _BIGP
+    any_i = -1
+    any_u = 0.0
+    any_v = 0.0
+    for s in range(s_pose.shape[0]):
+        if s_on[s] != 0:
+            q = _in_source(s_pose, s, P)
+            if q[2] > prm[_NEAR]:
+                uv = project_px(q[0], q[1], q[2], s_cam, s)
+                dist_b = _border_distance(uv, s_cam, s)
+                if dist_b > 0.5:
+                    pen = _penalty(P, dT, lenT, s_pose, s, dist_b, prm)
+                    if pen < any_p:
+                        any_p = pen
+                        any_i = s
+                        any_u = uv[0]
+                        any_v = uv[1]
+                    # visibility against the proxy depth rendered into the source
+                    if _unoccluded(s_vis, s_vscale, s, uv, q[2], prm[_VIS_TOL]):
+                        _insert_best(bp, bi, bu, bv, pen, s, uv[0], uv[1], kk)
+    if bi[0] < 0 and any_i >= 0:  # nobody sees P unoccluded: best source anyway
+        bp[0] = any_p
+        bi[0] = any_i
+        bu[0] = any_u
+        bv[0] = any_v
+
+
+@ti.func
+def _threshold(bp: ti.template(), bi: ti.template(), kk: ti.template()):
+    """The weights' zero: the (k+1)-th best penalty, else a bit above the worst kept one."""
+    thresh = bp[kk - 1]
+    if bi[kk - 1] < 0:
+        worst = 0.0
+        for m in ti.static(range(kk - 1)):
+            if bi[m] >= 0:
+                worst = ti.max(worst, bp[m])
+        thresh = worst * 1.5 + 1e-3
+    return thresh
+
+
+@ti.func
+def _blend_best(bp: ti.template(), bi: ti.template(), bu: ti.template(), bv: ti.template(),
+                s_img: ti.template(), s_cam: ti.template(), prm: ti.template(),
+                col: ti.template(), kk: ti.template()):  # fmt: skip
+    """Add the k best sources' colours to ``col`` (zero) with the ULR weights, normalised.
+
+    Returns:
+        The number of sources with a positive weight.
+    """
+    thresh = _threshold(bp, bi, kk)
+    wsum = 0.0
+    used = 0
+    for m in ti.static(range(kk - 1)):
+        if bi[m] >= 0:
+            w = ti.max(1.0 - bp[m] / thresh, 0.0) / (bp[m] + prm[_EPS])
+            if w > 0.0:
+                col += w * _bilinear(s_img, s_cam, bi[m], bu[m], bv[m])
+                wsum += w
+                used += 1
+    if wsum > 0:
+        col /= wsum
+    return used
+
+
 def _make_blend_kernel(k: int):
     """The ULR kernel for a fixed k (the best-k lists are unrolled at compile time)."""
     kk = k + 1
@@ -120,127 +318,19 @@ def _make_blend_kernel(k: int):
         ``prm`` = a, b, g, border_px, vis_tol, eps, near."""
         H = depth.shape[0]
         W = depth.shape[1]
-        a_w = prm[0]
-        b_w = prm[1]
-        g_w = prm[2]
-        border = prm[3]
-        vis_tol = prm[4]
-        eps = prm[5]
-        near = prm[6]
-        # novel camera centre C = -R^T t
-        C = ti.math.vec3(0.0, 0.0, 0.0)
-        for c in ti.static(range(3)):
-            C[c] = -(pose[0, c] * pose[0, 3] + pose[1, c] * pose[1, 3] + pose[2, c] * pose[2, 3])
+        C = _novel_centre(pose)
         for i, j in ti.ndrange(H, W):
             z = depth[i, j]
             col = ti.math.vec3(0.0, 0.0, 0.0)
             used = 0
             if z < 1e29:
-                xc = ti.math.vec3(rays[i, j, 0] * z, rays[i, j, 1] * z, z)
-                P = ti.math.vec3(0.0, 0.0, 0.0)
-                for c in ti.static(range(3)):
-                    P[c] = C[c] + pose[0, c] * xc[0] + pose[1, c] * xc[1] + pose[2, c] * xc[2]
-                dT = P - C
-                lenT = dT.norm() + 1e-9
+                P = _pixel_point(rays, pose, C, i, j, z)
                 bp = ti.Vector([_BIGP] * kk, dt=ti.f32)
                 bi = ti.Vector([-1] * kk, dt=ti.i32)
                 bu = ti.Vector([0.0] * kk, dt=ti.f32)
                 bv = ti.Vector([0.0] * kk, dt=ti.f32)
-                any_p = _BIGP
-                any_i = -1
-                any_u = 0.0
-                any_v = 0.0
-                for s in range(s_pose.shape[0]):
-                    if s_on[s] != 0:
-                        q = ti.math.vec3(0.0, 0.0, 0.0)
-                        for r in ti.static(range(3)):
-                            q[r] = (
-                                s_pose[s, r, 0] * P[0]
-                                + s_pose[s, r, 1] * P[1]
-                                + s_pose[s, r, 2] * P[2]
-                                + s_pose[s, r, 3]
-                            )
-                        if q[2] > near:
-                            uv = project_px(q[0], q[1], q[2], s_cam, s)
-                            sw = s_cam[s, 8]
-                            sh = s_cam[s, 9]
-                            dist_b = ti.min(ti.min(uv[0], sw - uv[0]), ti.min(uv[1], sh - uv[1]))
-                            if dist_b > 0.5:
-                                dS = P - ti.math.vec3(
-                                    s_pose[s, 0, 4], s_pose[s, 1, 4], s_pose[s, 2, 4]
-                                )
-                                lenS = dS.norm() + 1e-9
-                                cosang = ti.min(ti.max(dS.dot(dT) / (lenS * lenT), -1.0), 1.0)
-                                pen = a_w * ti.acos(cosang)
-                                pen += b_w * ti.max(0.0, lenS - lenT) / lenT
-                                pen += g_w * ti.max(0.0, 1.0 - dist_b / border)
-                                if pen < any_p:
-                                    any_p = pen
-                                    any_i = s
-                                    any_u = uv[0]
-                                    any_v = uv[1]
-                                # visibility against the proxy depth rendered into the source
-                                vx = ti.min(int(uv[0] * s_vscale[s, 0]), s_vis.shape[2] - 1)
-                                vy = ti.min(int(uv[1] * s_vscale[s, 1]), s_vis.shape[1] - 1)
-                                dvis = s_vis[s, vy, vx]
-                                if q[2] <= dvis * (1.0 + vis_tol):
-                                    cp = pen
-                                    ci = s
-                                    cu = uv[0]
-                                    cv = uv[1]
-                                    for m in ti.static(range(kk)):
-                                        if cp < bp[m]:
-                                            tp = bp[m]
-                                            tq = bi[m]
-                                            tu = bu[m]
-                                            tv = bv[m]
-                                            bp[m] = cp
-                                            bi[m] = ci
-                                            bu[m] = cu
-                                            bv[m] = cv
-                                            cp = tp
-                                            ci = tq
-                                            cu = tu
-                                            cv = tv
-                if bi[0] < 0 and any_i >= 0:  # nobody sees P unoccluded: best source anyway
-                    bp[0] = any_p
-                    bi[0] = any_i
-                    bu[0] = any_u
-                    bv[0] = any_v
-                # threshold: the (k+1)-th best penalty, else a bit above the worst kept one
-                thresh = bp[kk - 1]
-                if bi[kk - 1] < 0:
-                    worst = 0.0
-                    for m in ti.static(range(kk - 1)):
-                        if bi[m] >= 0:
-                            worst = ti.max(worst, bp[m])
-                    thresh = worst * 1.5 + 1e-3
-                wsum = 0.0
-                for m in ti.static(range(kk - 1)):
-                    if bi[m] >= 0:
-                        w = ti.max(1.0 - bp[m] / thresh, 0.0) / (bp[m] + eps)
-                        if w > 0.0:
-                            s = bi[m]
-                            x = bu[m] - 0.5
-                            y = bv[m] - 0.5
-                            x0 = ti.min(ti.max(int(ti.floor(x)), 0), int(s_cam[s, 8]) - 1)
-                            y0 = ti.min(ti.max(int(ti.floor(y)), 0), int(s_cam[s, 9]) - 1)
-                            x1 = ti.min(x0 + 1, int(s_cam[s, 8]) - 1)
-                            y1 = ti.min(y0 + 1, int(s_cam[s, 9]) - 1)
-                            fx = ti.min(ti.max(x - x0, 0.0), 1.0)
-                            fy = ti.min(ti.max(y - y0, 0.0), 1.0)
-                            for c in ti.static(range(3)):
-                                top = (1 - fx) * ti.cast(
-                                    s_img[s, y0, x0, c], ti.f32
-                                ) + fx * ti.cast(s_img[s, y0, x1, c], ti.f32)
-                                bot = (1 - fx) * ti.cast(
-                                    s_img[s, y1, x0, c], ti.f32
-                                ) + fx * ti.cast(s_img[s, y1, x1, c], ti.f32)
-                                col[c] += w * ((1 - fy) * top + fy * bot)
-                            wsum += w
-                            used += 1
-                if wsum > 0:
-                    col /= wsum
+                _rank_sources(P, C, s_pose, s_cam, s_on, s_vis, s_vscale, prm, bp, bi, bu, bv, kk)
+                used = _blend_best(bp, bi, bu, bv, s_img, s_cam, prm, col, kk)
             for c in ti.static(range(3)):
                 out[i, j, c] = col[c]
             nused[i, j] = used
@@ -282,7 +372,7 @@ class UlrRenderer:
         sources: the registered photos (see :func:`load_sources`).
         cfg: tour settings (``cfg.proxy`` and ``cfg.ulr`` are used here).
 
-    Taichi must be initialised first (:func:`scenebot.tour._ti.init_taichi`).
+    Taichi must be initialised first (:func:`scenebot.taichi_setup.init_taichi`).
     """
 
     def __init__(self, proxy: PointProxy, sources: list[SourceView], cfg: TourConfig):
@@ -385,6 +475,32 @@ class UlrRenderer:
         out[idx[chosen]] = 1
         return out
 
+    def _enabled(self, exclude: set[int] | None, only: set[int] | None) -> np.ndarray:
+        """(S,) int32 flags of the sources to use: ``only`` (all if None) less ``exclude``."""
+        on = np.ones(self.num_sources, np.int32)
+        if only is not None:
+            on[:] = 0
+            on[list(only)] = 1
+        if exclude:
+            on[list(exclude)] = 0
+        return on
+
+    def _kernel_params(self) -> np.ndarray:
+        """The kernel's ``prm`` (float32): a, b, g, border_px, vis_tol, eps, near."""
+        u = self.cfg.ulr
+        return np.array(
+            [
+                u.angle_weight,
+                u.resolution_weight,
+                u.fov_weight,
+                u.border_px,
+                u.visibility_tolerance,
+                u.epsilon,
+                self.cfg.proxy.near_m,
+            ],
+            np.float32,
+        )
+
     def render(
         self,
         cam: Camera,
@@ -411,12 +527,7 @@ class UlrRenderer:
         depth = self.splatter.depth(cam, R, t)
         if cam not in self._rays:
             self._rays[cam] = cam.pixel_rays()
-        on = np.ones(self.num_sources, np.int32)
-        if only is not None:
-            on[:] = 0
-            on[list(only)] = 1
-        if exclude:
-            on[list(exclude)] = 0
+        on = self._enabled(exclude, only)
         kk = int(k or u.k)
         if u.max_sources > 0:
             on = self._preselect(depth, cam, R, t, on, kk, u.max_sources)
@@ -424,18 +535,6 @@ class UlrRenderer:
         out = np.zeros((cam.height, cam.width, 3), np.float32)
         used = np.zeros((cam.height, cam.width), np.int32)
         pose = np.concatenate([np.asarray(R), np.asarray(t).reshape(3, 1)], 1).astype(np.float32)
-        prm = np.array(
-            [
-                u.angle_weight,
-                u.resolution_weight,
-                u.fov_weight,
-                u.border_px,
-                u.visibility_tolerance,
-                u.epsilon,
-                self.cfg.proxy.near_m,
-            ],
-            np.float32,
-        )
         _blend_kernel(kk)(
             d,
             self._rays[cam],
@@ -446,7 +545,7 @@ class UlrRenderer:
             self._img,
             self._vis,
             self._vscale,
-            prm,
+            self._kernel_params(),
             out,
             used,
         )

@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(CANNED / "round_000" / "capture"))
     args = ap.parse_args(argv)
     os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
-    from scenebot.capture import run_capture
+    from scenebot.capture.stage import run_capture
     from scenebot.config import validate_config
 
     data = yaml.safe_load(Path(args.config).read_text())

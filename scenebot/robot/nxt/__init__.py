@@ -64,17 +64,7 @@ def connect(cfg: NxtConfig, clock: Clock | None = None) -> NxtClient:
     def opener():
         return open_serial(cfg.port, cfg.baudrate)
 
-    client = NxtClient(
-        opener(),
-        clock=clock,
-        reply_timeout_s=cfg.reply_timeout_s,
-        retries=cfg.retries,
-        keepalive_interval_s=cfg.keepalive_interval_s,
-        opener=opener,
-        reconnect_attempts=cfg.reconnect_attempts,
-        reconnect_delay_s=cfg.reconnect_delay_s,
-        port_name=cfg.port,
-    )
+    client = NxtClient.from_config(opener(), cfg, clock=clock, opener=opener)
     try:
         client.handshake()
     except BaseException:

@@ -39,7 +39,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from scenebot.robot.base import BatteryLowError, LinkLostError, RobotError
 from scenebot.robot.nxt.protocol import (
@@ -58,6 +58,9 @@ from scenebot.robot.nxt.protocol import (
     ReplyTimeoutError,
     parse_reply,
 )
+
+if TYPE_CHECKING:
+    from scenebot.robot.nxt.config import NxtConfig
 
 log = logging.getLogger(__name__)
 
@@ -180,8 +183,9 @@ class BrickNotAnsweringError(LinkLostError):
     """The port opened but the brick does not answer."""
 
 
-def open_serial(port: str, baudrate: int = 115200, timeout_s: float = READ_SLICE_S) -> Transport:
-    """Open ``port`` with pyserial (exclusive lock), translating failures into clear errors.
+def open_serial(port: str, baudrate: int, timeout_s: float = READ_SLICE_S) -> Transport:
+    """Open ``port`` at ``baudrate`` (``nxt.baudrate``) with pyserial (exclusive lock),
+    translating failures into clear errors.
 
     Raises:
         PortNotFoundError: no such device.
@@ -241,6 +245,9 @@ class ClientStats:
 class NxtClient:
     """Talk to one NXT brick.
 
+    The link settings are ``nxt``'s (:class:`~scenebot.robot.nxt.config.NxtConfig`);
+    :meth:`from_config` passes them.
+
     Args:
         transport: an open pyserial-like port (read timeout small, e.g. 50 ms).
         clock: time source (default: the real clock).
@@ -258,12 +265,12 @@ class NxtClient:
         transport: Transport,
         *,
         clock: Clock | None = None,
-        reply_timeout_s: float = 1.0,
-        retries: int = 2,
-        keepalive_interval_s: float = 60.0,
+        reply_timeout_s: float,
+        retries: int,
+        keepalive_interval_s: float,
         opener: Callable[[], Transport] | None = None,
-        reconnect_attempts: int = 0,
-        reconnect_delay_s: float = 0.5,
+        reconnect_attempts: int,
+        reconnect_delay_s: float,
         port_name: str = "the NXT port",
     ):
         self.transport: Transport | None = transport
@@ -287,6 +294,29 @@ class NxtClient:
         self._in_reconnect = False
         self.closed = False
         self.link_dead: str | None = None  # set when reopening the port failed for good
+
+    @classmethod
+    def from_config(
+        cls,
+        transport: Transport,
+        cfg: NxtConfig,
+        *,
+        clock: Clock | None = None,
+        opener: Callable[[], Transport] | None = None,
+    ) -> NxtClient:
+        """A client on ``transport`` with ``cfg``'s link settings (reply timeout, retries,
+        keepalive, reconnects; ``cfg.port`` names the port in messages)."""
+        return cls(
+            transport,
+            clock=clock,
+            reply_timeout_s=cfg.reply_timeout_s,
+            retries=cfg.retries,
+            keepalive_interval_s=cfg.keepalive_interval_s,
+            opener=opener,
+            reconnect_attempts=cfg.reconnect_attempts,
+            reconnect_delay_s=cfg.reconnect_delay_s,
+            port_name=cfg.port,
+        )
 
     # ------------------------------------------------------------------ public API
 

@@ -5,15 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
+
+from scenebot.settings import Settings
 
 MOTOR_PORTS = {"A": 0, "B": 1, "C": 2}
 
 
-class NxtCameraConfig(BaseModel):
+class NxtCameraConfig(Settings):
     """The CHDK camera triggered through a motor port; photos arrive in an inbox folder."""
-
-    model_config = ConfigDict(extra="forbid")
 
     port: Literal["A", "B", "C"] = Field(
         "A", description="Motor port wired (through a 5 V regulator) to the camera's USB power."
@@ -38,10 +38,8 @@ class NxtCameraConfig(BaseModel):
     )
 
 
-class NxtConfig(BaseModel):
+class NxtConfig(Settings):
     """The NXT robot: serial link, port wiring, geometry, motion and safety settings."""
-
-    model_config = ConfigDict(extra="forbid")
 
     port: str = Field(
         "/dev/rfcomm0", description="Serial port of the brick (rfcomm device or emulator pty)."
@@ -128,11 +126,9 @@ class NxtConfig(BaseModel):
         return self
 
 
-class FaultConfig(BaseModel):
+class FaultConfig(Settings):
     """Faults the brick emulator injects. Command indices count every received command
     telegram from 0 (so tests can place a fault exactly)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     drop_reply_at: list[int] = Field(
         default_factory=list, description="Execute these commands but send no reply."
@@ -166,10 +162,8 @@ class FaultConfig(BaseModel):
     seed: int = Field(0, description="Random seed for drop_reply_prob.")
 
 
-class EmulatorConfig(BaseModel):
+class EmulatorConfig(Settings):
     """The NXT brick emulator on a pseudo-terminal, backed by the simulator's physics."""
-
-    model_config = ConfigDict(extra="forbid")
 
     link_path: Path | None = Field(
         None,

@@ -239,7 +239,7 @@ class Ultrasonic(I2CSensor):
         return self.read_registers(REG_MEASUREMENT, 1)[0]
 
 
-def compass_to_ccw(h_deg: float, convention: str, offset_deg: float = 0.0) -> float:
+def compass_to_ccw(h_deg: float, convention: str, offset_deg: float) -> float:
     """Convert a compass reading into a counter-clockwise heading in ``[0, 360)`` degrees.
 
     Args:
@@ -256,15 +256,19 @@ def compass_to_ccw(h_deg: float, convention: str, offset_deg: float = 0.0) -> fl
 
 
 class HiTechnicCompass(I2CSensor):
-    """HiTechnic compass: heading = 2 * reg 0x42 + reg 0x43 (degrees, clockwise)."""
+    """HiTechnic compass: heading = 2 * reg 0x42 + reg 0x43 (degrees, clockwise).
+
+    ``convention`` and ``offset_deg``: see :func:`compass_to_ccw` (``nxt.compass_convention``,
+    ``nxt.compass_offset_deg``).
+    """
 
     def __init__(
         self,
         client: NxtClient,
         port: int,
         clock: Clock,
-        convention: str = "clockwise",
-        offset_deg: float = 0.0,
+        convention: str,
+        offset_deg: float,
     ):
         super().__init__(client, port, SensorType.LOWSPEED, clock, "compass")
         self.convention, self.offset_deg = convention, offset_deg

@@ -2,7 +2,7 @@
 
 Classic frontier exploration (Yamauchi 1997) sends the robot to the boundary between free
 space it has seen and free space it has not, nearest first. Here, on the round's free space
-(the map's mesh cut by the camera plane, :mod:`scenebot.score.freespace`):
+(the map's mesh cut by the camera plane, :mod:`scenebot.mesh.freespace`):
 
 * a free cell is *seen* when it lies inside some photo's field of view within
   ``goals.frontier_range_m`` of the camera, with a line of sight through free cells;
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenebot.score.freespace import FreeSpace
+from scenebot.artifacts.freespace import FreeSpace
 
 
 def seen_cells(

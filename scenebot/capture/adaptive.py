@@ -7,8 +7,8 @@ bumper finds). Writes ``round_{r}/capture/`` like round 0:
 
 * ``images/r{r}_NNNN.jpg``: the photos taken at the goals (read-only, never deleted);
 * ``nav/``: the localization photos taken on the way (kept, not part of the map; a re-take
-  archives them with everything else, see :func:`scenebot.capturesession.archive_previous`);
-* ``session.jsonl`` / ``log.jsonl`` (a hard link; see :mod:`scenebot.capturesession`): photo
+  archives them with everything else, see :func:`scenebot.capture.session.archive_previous`);
+* ``session.jsonl`` / ``log.jsonl`` (a hard link; see :mod:`scenebot.capture.session`): photo
   records carry ``odometry``, ``localization`` (the robot pose estimated from that very
   photo, map frame), ``localization_inliers`` and ``goal_index``; events ``follow_start``,
   ``localize``, ``obstacle``, ``replan``, ``follow_end``, ``goal_reached`` /
@@ -47,7 +47,7 @@ from scenebot.config import Config
 from scenebot.geometry import read_map_geometry, robot_xy_for_camera
 from scenebot.robot.base import Pose2D, wrap_angle
 
-log = logging.getLogger("scenebot.adaptive")
+log = logging.getLogger("scenebot.capture.adaptive")
 
 
 def goal_headings(theta: float, cfg) -> list[float]:
@@ -124,7 +124,7 @@ class SnappingPlanner:
 
 
 def _goal_event(clog: CaptureLog, robot, event: str, index: int, goal: dict, **fields):
-    from scenebot.explore import log_event
+    from scenebot.capture.explore import log_event
 
     log_event(clog, robot, event, goal_index=index, goal=goal, **fields)
     log.info("goal %d: %s %s", index, event, fields.get("reason", ""))
@@ -166,7 +166,7 @@ def visit_goals(
         paths: ``paths.json``'s paths (goal, status, waypoints, robot_goal).
         spare: backup goals, best first.
         go: ``go(goal, path or None, k)`` drives there (None: plan from here) and returns a
-            :class:`scenebot.follow.FollowResult`.
+            :class:`scenebot.capture.follow.FollowResult`.
         shoot: ``shoot(goal, k, first_photo_index)`` takes the goal's photos, returns how many.
         event: ``event(name, k, goal, **fields)`` logs a goal event.
         per_goal: photos a goal takes; ``budget``: photos of the round at most.
@@ -259,7 +259,7 @@ def run_adaptive(
     Raises:
         FileNotFoundError: an input of the previous round is missing (names it).
     """
-    from scenebot.capturesession import capture_lock
+    from scenebot.capture.session import capture_lock
 
     if round_index < 1:
         raise ValueError("adaptive capture is for rounds >= 1 (round 0 explores)")
@@ -269,23 +269,9 @@ def run_adaptive(
         return _run_adaptive(cfg, Path(capture_dir), round_index, Path(prev_round_dir), progress)
 
 
-def _run_adaptive(
-    cfg: Config, capture_dir: Path, round_index: int, prev: Path, progress: bool
-) -> dict:
-    """:func:`run_adaptive` holding the capture lock."""
-    from scenebot.capturesession import (
-        SESSION_LOG,
-        finish_capture,
-        session_record,
-        start_capture,
-        stopping_safely,
-    )
-    from scenebot.follow import PathFollower
-    from scenebot.localize import make_localizer
-    from scenebot.plan.navgrid import NavGrid
-    from scenebot.plan.path import GridPlanner
-    from scenebot.robot.factory import make_backend
-
+def _previous_round(prev: Path, round_index: int) -> dict[str, Path]:
+    """The files of round r-1 that round r drives by; a missing one is an error saying how to
+    build it."""
     need = {
         "map": prev / "sfm" / "images.bin",
         "descriptors": prev / "sfm" / "point_descriptors.npz",
@@ -299,12 +285,105 @@ def _run_adaptive(
                 f"{p}: the {what} of round {round_index - 1} is missing; build it first "
                 f"(snakemake {p})"
             )
-    goals_doc = json.loads(need["goals"].read_text(encoding="utf-8"))
-    paths_doc = json.loads(need["paths"].read_text(encoding="utf-8"))
-    fcfg, acfg = cfg.follow, cfg.adaptive
-    if fcfg.compass_gate_deg > 0 and not map_heading_from_compass(prev / "sfm"):
+    return need
+
+
+def _follow_settings(cfg: Config, sfm_dir: Path):
+    """The path follower's settings: no compass check of fixes when the map's heading does
+    not come from the compass."""
+    fcfg = cfg.follow
+    if fcfg.compass_gate_deg > 0 and not map_heading_from_compass(sfm_dir):
         log.info("the map's heading does not come from the compass: no compass check of fixes")
         fcfg = fcfg.model_copy(update={"compass_gate_deg": 0.0})
+    return fcfg
+
+
+class _GoalVisits:
+    """What the round does at each goal, for :func:`visit_goals`: drive there (``go``), take
+    the photos (``shoot``), and log what happened (``event``)."""
+
+    def __init__(self, cfg, fcfg, robot, camera, follower, clog, capture_dir, round_index, bar):
+        self.cfg, self.fcfg, self.acfg = cfg, fcfg, cfg.adaptive
+        self.robot, self.camera, self.follower, self.clog = robot, camera, follower, clog
+        self.capture_dir, self.round_index, self.bar = capture_dir, round_index, bar
+        self.truth = getattr(robot, "truth_record", None)
+        self.inliers: list[int] = []  # of the photos' localizations that succeeded
+
+    def go(self, goal: dict, path: dict | None, k: int):
+        if path is not None:
+            return _go(self.follower, path, float(goal["theta"]), k)
+        xy = np.array([goal["x"], goal["y"]], float)
+        return self.follower.go_to_view(xy, float(goal["theta"]), k)
+
+    def shoot(self, goal: dict, k: int, first: int) -> int:
+        follower, robot = self.follower, self.robot
+        for j, h in enumerate(goal_headings(float(goal["theta"]), self.acfg)):
+            turn = wrap_angle(h - follower.pose.theta)
+            if abs(math.degrees(turn)) > self.fcfg.min_turn_deg:
+                robot.turn(turn)
+            name = f"images/r{self.round_index:03d}_{first + j:04d}.jpg"
+            rec = _photo_at(follower, robot, self.camera, self.capture_dir, name,
+                            self.acfg.localize_photos)  # fmt: skip
+            record = {"type": "photo", "index": first + j, **rec, "goal_index": k,
+                      "requested_heading": h % (2 * math.pi)}  # fmt: skip
+            if self.truth is not None:
+                record["truth"] = self.truth()
+            self.clog.write(record)
+            if rec.get("localization_ok"):
+                self.inliers.append(rec["localization_inliers"])
+            self.bar.update(1)
+        return j + 1
+
+    def event(self, name: str, k: int, goal: dict, **fields):
+        if fields.get("robot_goal") is None and "theta" in goal:  # a backup goal
+            xy = np.array([goal["x"], goal["y"]], float)
+            mount = self.cfg.camera_mount()
+            fields["robot_goal"] = robot_xy_for_camera(xy, goal["theta"], mount).tolist()
+        _goal_event(self.clog, self.robot, name, k, goal, **fields)
+
+
+def _round_summary(round_index: int, n_photos: int, paths: list, outcomes: list[dict],
+                   capture_dir: Path, inliers: list[int], world) -> dict:  # fmt: skip
+    """The capture log's ``end`` record (and the command's output)."""
+    summary = {
+        "round": round_index,
+        "photos": n_photos,
+        "goals": len(paths),
+        "backups_tried": sum("backup_for" in o for o in outcomes),
+        "reached": sum(o["status"] == "reached" for o in outcomes),
+        "abandoned": sum(o["status"] == "abandoned" for o in outcomes),
+        "skipped": sum(o["status"] == "skipped" for o in outcomes),
+        "outcomes": outcomes,
+        "nav_photos": len(list((capture_dir / "nav").glob("*.jpg"))),
+        "photos_localized": len(inliers),
+        "localization_inliers_median": float(np.median(inliers)) if inliers else None,
+    }
+    if world is not None:
+        summary["max_penetration_m"] = world.max_penetration_m
+    return summary
+
+
+def _run_adaptive(
+    cfg: Config, capture_dir: Path, round_index: int, prev: Path, progress: bool
+) -> dict:
+    """:func:`run_adaptive` holding the capture lock."""
+    from scenebot.capture.follow import PathFollower
+    from scenebot.capture.session import (
+        SESSION_LOG,
+        finish_capture,
+        session_record,
+        start_capture,
+        stopping_safely,
+    )
+    from scenebot.localize import make_localizer
+    from scenebot.plan.navgrid import NavGrid
+    from scenebot.plan.path import GridPlanner
+    from scenebot.robot.factory import make_backend
+
+    need = _previous_round(prev, round_index)
+    goals_doc = json.loads(need["goals"].read_text(encoding="utf-8"))
+    paths_doc = json.loads(need["paths"].read_text(encoding="utf-8"))
+    fcfg, acfg = _follow_settings(cfg, prev / "sfm"), cfg.adaptive
     per_goal = acfg.circle_photos if acfg.pattern == "circle" else acfg.fan_photos
     paths = paths_doc.get("paths", [])
     budget = min(acfg.max_photos, per_goal * len(paths))
@@ -315,87 +394,39 @@ def _run_adaptive(
         GridPlanner(NavGrid.load(need["grid"]), cfg.plan.simplify_factor), cfg.plan.goal_snap_m
     )
     initial = map_end_pose(prev / "sfm", cfg.camera_mount())
-    truth = getattr(robot, "truth_record", None)
-    session = capture_dir / SESSION_LOG
     outcomes: list[dict] = []
-    inliers: list[int] = []
     n_photos = 0
     with (
         tempfile.TemporaryDirectory(prefix="scenebot-index-") as tmp,
-        CaptureLog(session) as clog,
+        CaptureLog(capture_dir / SESSION_LOG) as clog,
         robot,
     ):
         localizer = make_localizer(prev / "sfm", cfg.localize, cache_file=Path(tmp) / "i.flann")
         clog.write(
             session_record(
-                cfg,
-                robot,
-                world,
-                round_index,
-                {"world", "sim", "follow", "adaptive", "localize"},
-                map=str(prev / "sfm"),
-                map_sha1=map_fingerprint(prev / "sfm"),
+                cfg, robot, world, round_index, {"world", "sim", "follow", "adaptive", "localize"},
+                map=str(prev / "sfm"), map_sha1=map_fingerprint(prev / "sfm"),
                 previous_round_complete=goals_doc.get("complete"),
                 initial_estimate=initial.as_dict(),
             )
-        )
+        )  # fmt: skip
         bar = tqdm(total=budget, desc=f"round {round_index} photos", unit="photo",
                    disable=not progress)  # fmt: skip
         follower = PathFollower(
             robot, camera, localizer, planner, fcfg, capture_dir / "nav", clog,
-            truth=truth, initial_pose=initial, trust_initial=False,
+            truth=getattr(robot, "truth_record", None), initial_pose=initial,
+            trust_initial=False,
         )  # fmt: skip
+        visits = _GoalVisits(cfg, fcfg, robot, camera, follower, clog, capture_dir,
+                             round_index, bar)  # fmt: skip
         with stopping_safely(clog, robot, capture_dir, world, bar):
             follower.localize_now()  # where the robot really is, before the first path
-
-            def go(goal: dict, path: dict | None, k: int):
-                if path is not None:
-                    return _go(follower, path, float(goal["theta"]), k)
-                xy = np.array([goal["x"], goal["y"]], float)
-                return follower.go_to_view(xy, float(goal["theta"]), k)
-
-            def shoot(goal: dict, k: int, first: int) -> int:
-                for j, h in enumerate(goal_headings(float(goal["theta"]), acfg)):
-                    turn = wrap_angle(h - follower.pose.theta)
-                    if abs(math.degrees(turn)) > fcfg.min_turn_deg:
-                        robot.turn(turn)
-                    name = f"images/r{round_index:03d}_{first + j:04d}.jpg"
-                    rec = _photo_at(follower, robot, camera, capture_dir, name,
-                                    acfg.localize_photos)  # fmt: skip
-                    record = {"type": "photo", "index": first + j, **rec, "goal_index": k,
-                              "requested_heading": h % (2 * math.pi)}  # fmt: skip
-                    if truth is not None:
-                        record["truth"] = truth()
-                    clog.write(record)
-                    if rec.get("localization_ok"):
-                        inliers.append(rec["localization_inliers"])
-                    bar.update(1)
-                return j + 1
-
-            def event(name: str, k: int, goal: dict, **fields):
-                if fields.get("robot_goal") is None and "theta" in goal:  # a backup goal
-                    xy = np.array([goal["x"], goal["y"]], float)
-                    mount = cfg.camera_mount()
-                    fields["robot_goal"] = robot_xy_for_camera(xy, goal["theta"], mount).tolist()
-                _goal_event(clog, robot, name, k, goal, **fields)
-
             spare = unused_backups(goals_doc, paths) if acfg.replace_abandoned else []
-            outcomes, n_photos = visit_goals(paths, spare, go, shoot, event, per_goal, budget)
-        summary = {
-            "round": round_index,
-            "photos": n_photos,
-            "goals": len(paths),
-            "backups_tried": sum("backup_for" in o for o in outcomes),
-            "reached": sum(o["status"] == "reached" for o in outcomes),
-            "abandoned": sum(o["status"] == "abandoned" for o in outcomes),
-            "skipped": sum(o["status"] == "skipped" for o in outcomes),
-            "outcomes": outcomes,
-            "nav_photos": len(list((capture_dir / "nav").glob("*.jpg"))),
-            "photos_localized": len(inliers),
-            "localization_inliers_median": float(np.median(inliers)) if inliers else None,
-        }
-        if world is not None:
-            summary["max_penetration_m"] = world.max_penetration_m
+            outcomes, n_photos = visit_goals(
+                paths, spare, visits.go, visits.shoot, visits.event, per_goal, budget
+            )
+        summary = _round_summary(round_index, n_photos, paths, outcomes, capture_dir,
+                                 visits.inliers, world)  # fmt: skip
         write_faults(clog, robot)  # the faults recovered after the last photo or event
         clog.write({"type": "end", "t": robot.now, "reason": "goals visited", **summary})
     finish_capture(

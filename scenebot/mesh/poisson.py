@@ -9,17 +9,13 @@ the points' bounding box grown by a margin (Poisson closes the surface far outsi
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import numpy as np
 
-from scenebot.score.config import MeshConfig
+from scenebot.artifacts.mesh import MeshError, check_mesh
+from scenebot.mesh.config import MeshConfig
 
 log = logging.getLogger(__name__)
-
-
-class MeshError(ValueError):
-    """The map cannot give a usable mesh; the message says which round and what to change."""
 
 
 def estimate_normals(xyz: np.ndarray, view_dir: np.ndarray, knn: int) -> np.ndarray:
@@ -46,18 +42,20 @@ def estimate_normals(xyz: np.ndarray, view_dir: np.ndarray, knn: int) -> np.ndar
 def poisson_mesh(
     xyz: np.ndarray,
     normals: np.ndarray,
-    depth: int = 8,
-    density_quantile: float = 0.05,
-    bbox_margin_m: float = 0.25,
+    depth: int,
+    density_quantile: float,
+    bbox_margin_m: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Poisson surface through oriented points, trimmed and cropped.
 
     Args:
         xyz: (N, 3) points (m).
         normals: (N, 3) unit normals.
-        depth: Poisson octree depth.
-        density_quantile: vertices below this quantile of the Poisson density are removed.
-        bbox_margin_m: crop to the points' bounding box grown by this (m).
+        depth: Poisson octree depth (``mesh.poisson_depth``).
+        density_quantile: vertices below this quantile of the Poisson density are removed
+            (``mesh.density_quantile``).
+        bbox_margin_m: crop to the points' bounding box grown by this (m;
+            ``mesh.bbox_margin_m``).
 
     Returns:
         vertices (V, 3) float64 (m), faces (F, 3) int64.
@@ -81,31 +79,6 @@ def poisson_mesh(
     mesh.remove_unreferenced_vertices()
     mesh.remove_degenerate_triangles()
     return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.triangles, np.int64)
-
-
-def check_mesh(verts: np.ndarray, faces: np.ndarray, where: str) -> None:
-    """Raise :class:`MeshError` when a mesh is empty or degenerate (zero area or volume extent).
-
-    Args:
-        verts: (V, 3) vertices (m).
-        faces: (F, 3) triangles.
-        where: what to name in the message (e.g. ``"round_002 mesh.ply"``).
-    """
-    hint = (
-        "the map of this round has too few or too flat 3D points; capture more photos "
-        "(more round-0 exploration), or lower mesh.density_quantile / mesh.poisson_depth"
-    )
-    if len(faces) == 0 or len(verts) < 3:
-        raise MeshError(f"{where}: the mesh is empty; {hint}")
-    tri = verts[faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    if not np.isfinite(verts).all():
-        raise MeshError(f"{where}: the mesh has non-finite vertices; {hint}")
-    if area.sum() < 1e-6:
-        raise MeshError(f"{where}: the mesh has zero area (degenerate triangles); {hint}")
-    ext = verts.max(axis=0) - verts.min(axis=0)
-    if np.sort(ext)[1] < 1e-3:
-        raise MeshError(f"{where}: the mesh is degenerate (extent {ext.round(4)} m); {hint}")
 
 
 def build_mesh(
@@ -159,51 +132,3 @@ def build_mesh(
     V, F = poisson_mesh(p, normals, cfg.poisson_depth, cfg.density_quantile, cfg.bbox_margin_m)
     check_mesh(V, F, where)
     return V, F
-
-
-def write_mesh(path: str | Path, verts: np.ndarray, faces: np.ndarray) -> None:
-    """Write a triangle mesh as binary PLY (open3d)."""
-    import open3d as o3d
-
-    m = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(np.asarray(verts, np.float64)),
-        o3d.utility.Vector3iVector(np.asarray(faces, np.int32)),
-    )
-    m.compute_vertex_normals()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not o3d.io.write_triangle_mesh(str(path), m):
-        raise OSError(f"could not write {path}")
-
-
-def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a triangle mesh (PLY/OBJ/...) as vertices (V, 3) float64 and faces (F, 3) int64."""
-    import open3d as o3d
-
-    if not Path(path).exists():
-        raise FileNotFoundError(f"{path}: no mesh here; run the mesh stage for this round first")
-    m = o3d.io.read_triangle_mesh(str(path))
-    return np.asarray(m.vertices, np.float64), np.asarray(m.triangles, np.int64)
-
-
-def decimate(verts: np.ndarray, faces: np.ndarray, max_triangles: int):
-    """Quadric decimation to at most ``max_triangles`` (0 or a smaller mesh: unchanged).
-
-    Args:
-        verts: (V, 3) vertices (m).
-        faces: (F, 3) triangles.
-        max_triangles: target triangle count.
-
-    Returns:
-        vertices (V', 3), faces (F', 3).
-    """
-    if max_triangles <= 0 or len(faces) <= max_triangles:
-        return verts, faces
-    import open3d as o3d
-
-    m = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(np.asarray(verts, np.float64)),
-        o3d.utility.Vector3iVector(np.asarray(faces, np.int32)),
-    )
-    m = m.simplify_quadric_decimation(target_number_of_triangles=int(max_triangles))
-    m.remove_unreferenced_vertices()
-    return np.asarray(m.vertices, np.float64), np.asarray(m.triangles, np.int64)

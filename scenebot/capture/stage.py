@@ -1,5 +1,5 @@
 """The capture stage of round 0: random exploration with the configured robot, photos and
-log written into ``results/{scene}/round_000/capture/`` as :mod:`scenebot.capturesession`
+log written into ``results/{scene}/round_000/capture/`` as :mod:`scenebot.capture.session`
 describes (the lock, the archive of an earlier attempt, the log, the picture).
 """
 
@@ -12,8 +12,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from scenebot.capturelog import CaptureLog, read_log, write_faults
-from scenebot.capturesession import (
+from scenebot.capture.session import (
     SESSION_LOG,
     capture_lock,
     finish_capture,
@@ -21,6 +20,7 @@ from scenebot.capturesession import (
     start_capture,
     stopping_safely,
 )
+from scenebot.capturelog import CaptureLog, read_log, write_faults
 from scenebot.config import Config
 from scenebot.robot.factory import make_backend
 
@@ -37,7 +37,7 @@ def run_capture(cfg: Config, capture_dir: Path, round_index: int = 0, progress: 
     Returns:
         The exploration summary (photos, bumps, stalls, circles) as a dict.
     """
-    from scenebot.explore import PhotoTaker, random_exploration
+    from scenebot.capture.explore import PhotoTaker, random_exploration
 
     capture_dir = Path(capture_dir)
     with capture_lock(capture_dir):

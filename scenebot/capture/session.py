@@ -1,5 +1,5 @@
-"""What every capture does with its folder (round 0 in :mod:`scenebot.capture`, the adaptive
-rounds in :mod:`scenebot.adaptive`): the lock, the archive of an earlier attempt, the first
+"""What every capture does with its folder (round 0 in :mod:`scenebot.capture.stage`, the adaptive
+rounds in :mod:`scenebot.capture.adaptive`): the lock, the archive of an earlier attempt, the first
 record of the log, the stop on an error, the finish.
 
 A capture writes into ``results/{scene}/round_{r}/capture/``:

@@ -1,0 +1,103 @@
+"""Settings of the goals stage (``goals:`` in config.yaml)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from scenebot.settings import Settings
+
+
+class GoalsConfig(Settings):
+    """Choice of goals among the scored candidates (``goals`` stage)."""
+
+    method: Literal["score", "frontier"] = Field(
+        "score",
+        description="score: the paper's heuristic (poorest predicted rendering first); "
+        "frontier: the baseline, nearest boundary between seen and unseen free space first.",
+    )
+    k: int = Field(5, ge=1, description="Most goals chosen per round (count).")
+    backups: int = Field(
+        5,
+        ge=0,
+        description="Next-ranked candidates listed as backups: the plan stage takes one in "
+        "place of a goal it cannot route to (inside an obstacle of its grid, outside it, or "
+        "walled off).",
+    )
+    frontier_range_m: float = Field(
+        3.0, gt=0, description="frontier: a photo sees free space up to this distance (m)."
+    )
+    frontier_min_area_m2: float = Field(
+        0.25, ge=0, description="frontier: unseen free space in smaller pieces is ignored (m^2)."
+    )
+    frontier_look_m: float = Field(
+        1.0, gt=0, description="frontier: a goal looks at the unseen free space this near (m)."
+    )
+    nms_radius_m: float = Field(
+        0.5, ge=0.0, description="Two goals closer than this (m) must differ in heading."
+    )
+    nms_angle_deg: float = Field(
+        45.0, ge=0.0, le=180.0, description="...by more than this heading difference (degrees)."
+    )
+    complete_threshold_deg: float = Field(
+        10.0,
+        ge=0.0,
+        description="Exploration is complete when the best (highest) view score is below this.",
+    )
+    min_score_gain: float = Field(
+        0.15,
+        ge=0.0,
+        lt=1.0,
+        description="Diminishing returns: exploration is also complete when, since the "
+        "previous round, the mean view score over the candidates (the predicted rendering "
+        "error over the free space) moved by less than this fraction either way and the free "
+        "space grew by less than min_area_gain. The best score alone rarely falls below "
+        "complete_threshold_deg: a view of never-photographed surface (ceiling, behind "
+        "furniture) keeps it high. 0: off.",
+    )
+    min_area_gain: float = Field(
+        0.1,
+        ge=0.0,
+        description="See min_score_gain: a round whose photos added free space the map did "
+        "not know (farther than new_area_margin_m from the previous round's free space) of "
+        "this fraction of the previous free area or more opened space (another room, a "
+        "corridor), and exploration goes on. Without the previous round's free space: the "
+        "net growth of the free area.",
+    )
+    patience: int = Field(
+        2,
+        ge=1,
+        description="Diminishing returns must hold in this many consecutive rounds: one "
+        "round's gain varies from campaign to campaign (the same office: 12% in one, 22% in "
+        "another), so a single low round does not end the campaign.",
+    )
+    new_area_margin_m: float = Field(
+        0.3,
+        ge=0.0,
+        description="Free space within this distance (m) of the previous round's does not "
+        "count as new (its outline moves a little as the map improves).",
+    )
+    min_seen_fraction: float = Field(
+        0.4,
+        ge=0.0,
+        le=1.0,
+        description="Candidates whose view shows less of the map's already photographed "
+        "surface than this share of its pixels are not goals: a photo there could not be "
+        "registered to the map (too little overlap). 0: the paper's choice, overlap ignored.",
+    )
+    min_matchable_points: int = Field(
+        100,
+        ge=0,
+        description="Candidates predicted to match fewer of the map's 3D points than this "
+        "(candidates.csv `matchable_points`: in view, seen within score.match_angle_deg and "
+        "score.match_scale_ratio of how the map saw them) are not goals: their photos would "
+        "not register. An area of photographed surface is not enough: a plain wall at a "
+        "grazing angle has no features. 0: off.",
+    )
+    min_hit_fraction: float = Field(
+        0.2,
+        ge=0.0,
+        le=1.0,
+        description="Candidates whose render hits the mesh on fewer pixels than this are skipped.",
+    )

@@ -1,0 +1,182 @@
+"""The goals stage's entry point: ``run(cfg, inputs, outputs)`` with the rule's paths."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.artifacts import round_name
+from scenebot.artifacts.candidates import read_candidates
+from scenebot.artifacts.freespace import FreeSpace, FreeSpaceError
+from scenebot.geometry import read_sparse_map
+from scenebot.goals.config import GoalsConfig
+from scenebot.goals.select import goals_document, select_goals, write_goals
+from scenebot.goals.stopping import apply_stopping_rule, diminishing_returns
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class GoalsInputs:
+    """Inputs of the goals stage."""
+
+    candidates_csv: Path
+    freespace_npz: Path
+    sfm_dir: Path | None = None  # the map (camera poses); the frontier method needs it
+    previous_goals_json: Path | None = None  # the previous round's (diminishing returns)
+    previous_freespace_npz: Path | None = None  # the previous round's (its new free space)
+
+
+@dataclass
+class GoalsOutputs:
+    """Outputs: ``goals.json`` and an optional heat-map picture."""
+
+    goals_json: Path
+    goals_png: Path | None = None
+
+
+def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> dict:
+    """Choose the goals of the next round and decide whether exploration is complete.
+
+    Returns:
+        The goals.json document.
+    """
+    where = round_name(inputs.candidates_csv, outputs.goals_json)
+    cols = read_candidates(inputs.candidates_csv)
+    poses = np.column_stack([cols["x"], cols["y"], cols["theta"]])
+    if len(poses) == 0:
+        raise FreeSpaceError(
+            f"{where}: {inputs.candidates_csv} holds zero candidates; raise score.n_candidates"
+        )
+    fs = FreeSpace.load(inputs.freespace_npz)
+    valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & fs.contains(poses[:, :2])
+    any_valid = valid.copy()
+    registrable = (cols["seen_fraction"] >= cfg.min_seen_fraction) & (
+        cols["matchable_points"] >= cfg.min_matchable_points
+    )
+    if cfg.method == "score" and (valid & registrable).any():
+        valid &= registrable
+    elif cfg.method == "score" and valid.any():
+        log.warning(
+            "%s: no candidate shows goals.min_seen_fraction = %.2f of photographed surface "
+            "and goals.min_matchable_points = %d map points; goals ignore the overlap this "
+            "round", where, cfg.min_seen_fraction, cfg.min_matchable_points,
+        )  # fmt: skip
+    score = np.where(valid, cols["score_deg"], np.nan)
+    if cfg.method == "frontier":
+        return _frontier_goals(cfg, inputs, outputs, fs, score, where)
+    ranked = select_goals(
+        poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
+    )
+    scored = any_valid & np.isfinite(cols["score_deg"])
+    mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
+    map_images = _registered_images(inputs.sfm_dir)
+    new_area = None
+    prev_fs = inputs.previous_freespace_npz
+    if prev_fs is not None and Path(prev_fs).is_file():
+        new_area = fs.new_area_m2(FreeSpace.load(prev_fs), cfg.new_area_margin_m)
+    returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
+                                  cfg.min_score_gain, cfg.min_area_gain, map_images,
+                                  new_area, patience=cfg.patience)  # fmt: skip
+    chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
+    doc = goals_document(
+        poses,
+        score,
+        chosen,
+        cfg.complete_threshold_deg,
+        where,
+        extra={
+            "n_valid": int(valid.sum()),
+            "min_seen_fraction": cfg.min_seen_fraction,
+            "min_matchable_points": cfg.min_matchable_points,
+            # the best score over every candidate, registrable or not (for information:
+            # "complete" and the goals only consider views a photo could be registered from)
+            "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
+            "nms_radius_m": cfg.nms_radius_m,
+            "nms_angle_deg": cfg.nms_angle_deg,
+            "mean_score_deg": None if mean_score is None else round(mean_score, 4),
+            "free_area_m2": round(fs.area_m2, 4),
+            "map_images": map_images,
+            "score_gain": returns,
+        },
+    )
+    apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
+    if doc["complete"]:
+        log.info("%s: exploration complete: %s", where, doc["complete_because"])
+    # next in rank, for the planner to use in place of a goal it cannot route to
+    spare = goals_document(poses, score, backups, 0.0, where)["goals"]
+    doc["backups"] = [{**g, "rank": g["rank"] + len(chosen)} for g in spare]
+    write_goals(outputs.goals_json, doc)
+    if outputs.goals_png is not None:
+        from scenebot.goals.plots import plot_goals
+
+        title = f"{where}: goals (complete={doc['complete']})"
+        plot_goals(outputs.goals_png, fs, poses, score, chosen, title)
+    return doc
+
+
+def _registered_images(sfm_dir: Path | None) -> int | None:
+    """Registered images of the round's map, None without one."""
+    if sfm_dir is None or not (Path(sfm_dir) / "images.bin").is_file():
+        return None
+    import pycolmap
+
+    return int(pycolmap.Reconstruction(str(sfm_dir)).num_reg_images())
+
+
+def _best(score: np.ndarray) -> float | None:
+    finite = np.isfinite(score)
+    return round(float(np.max(score[finite])), 4) if finite.any() else None
+
+
+def _goal_record(rank: int, g: dict) -> dict:
+    x, y, t = round(g["x"], 4), round(g["y"], 4), round(g["theta"], 5)
+    return {"rank": rank, "candidate": None, "x": x, "y": y, "theta": t, "score_deg": None}
+
+
+def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, fs: FreeSpace,
+                    score: np.ndarray, where: str) -> dict:  # fmt: skip
+    """The frontier baseline (``goals.method: frontier``): see :mod:`scenebot.goals.frontier`.
+
+    The candidates' scores are still reported (``best_score_deg``) so campaigns compare, but
+    they choose nothing; the map is complete when no frontier is left.
+    """
+    from scenebot.geometry import read_map_geometry
+    from scenebot.goals.frontier import frontier_cells, frontier_goals, seen_cells
+
+    if inputs.sfm_dir is None:
+        raise ValueError(f"{where}: goals.method=frontier needs the map (round_XXX/sfm)")
+    _, centres, _, headings = read_map_geometry(inputs.sfm_dir, with_headings=True)
+    smap = read_sparse_map(inputs.sfm_dir)
+    intr = smap.intrinsics[0]
+    hfov = float(np.degrees(2 * np.arctan(0.5 * intr.width / intr.fx)))
+    seen = seen_cells(fs, centres[:, :2], headings, hfov, cfg.frontier_range_m)
+    area = cfg.frontier_min_area_m2
+    goals = frontier_goals(
+        fs, seen, centres[-1, :2], cfg.k, cfg.nms_radius_m, cfg.frontier_look_m, area
+    )
+    finite = np.isfinite(score)
+    doc = {
+        "round": where,
+        "method": "frontier",
+        "complete": not goals,
+        "best_score_deg": round(float(np.max(score[finite])), 4) if finite.any() else None,
+        "threshold_deg": cfg.complete_threshold_deg,
+        "n_candidates": len(score),
+        "pose_convention": "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)",
+        "seen_free_fraction": float(seen.sum() / max(fs.mask.sum(), 1)),
+        "goals": [_goal_record(r, g) for r, g in enumerate(goals)],
+    }
+    write_goals(outputs.goals_json, doc)
+    if outputs.goals_png is not None:
+        from scenebot.goals.plots import plot_frontier
+
+        plot_frontier(
+            outputs.goals_png, fs, seen, frontier_cells(fs, seen, area), centres[:, :2], goals,
+            f"{where}: frontier goals (complete={doc['complete']}, "
+            f"{100 * doc['seen_free_fraction']:.0f}% of the free space seen)",
+        )  # fmt: skip
+    return doc

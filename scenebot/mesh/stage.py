@@ -1,0 +1,61 @@
+"""The mesh stage's entry point: ``run(cfg, inputs, outputs)`` with the rule's paths."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from scenebot.artifacts import round_name
+from scenebot.artifacts.mesh import MeshError, write_mesh
+from scenebot.geometry import read_sparse_map
+from scenebot.mesh.config import MeshConfig
+from scenebot.mesh.freespace import compute_freespace, observation_rays
+from scenebot.mesh.poisson import build_mesh
+
+
+@dataclass
+class MeshInputs:
+    """Inputs of the mesh stage: ``sfm_dir`` = ``round_{r}/sfm/`` (COLMAP binary model)."""
+
+    sfm_dir: Path
+
+
+@dataclass
+class MeshOutputs:
+    """Outputs: ``mesh.ply``, ``freespace.json``, ``freespace.npz``, ``freespace.png``."""
+
+    mesh_ply: Path
+    freespace_json: Path
+    freespace_npz: Path
+    freespace_png: Path | None = None
+
+
+def run(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs) -> dict:
+    """Poisson mesh of the map and its free space.
+
+    Returns:
+        Summary: vertex/face counts, free area (m^2), whether the free space is closed.
+    """
+    where = round_name(inputs.sfm_dir, outputs.mesh_ply)
+    smap = read_sparse_map(inputs.sfm_dir)
+    if len(smap.names) == 0:
+        raise MeshError(f"{where}: the map in {inputs.sfm_dir} has no registered images")
+    V, F = build_mesh(smap.xyz, smap.view_dir, smap.track_len, cfg, where, smap.centres)
+    write_mesh(outputs.mesh_ply, V, F)
+    cam_xy = smap.centres[:, :2]
+    rays = observation_rays(inputs.sfm_dir, cfg.min_track_length) if cfg.seen_free_space else None
+    fs = compute_freespace(
+        V, F, cam_xy, cfg.robot_radius_m, cfg.cut_heights_m, cfg.grid_resolution_m, where,
+        rays=rays,
+    )  # fmt: skip
+    fs.save(outputs.freespace_json, outputs.freespace_npz, where)
+    if outputs.freespace_png is not None:
+        from scenebot.mesh.plots import plot_freespace
+
+        plot_freespace(outputs.freespace_png, fs, cam_xy, where)
+    return {
+        "vertices": len(V),
+        "faces": len(F),
+        "free_area_m2": fs.area_m2,
+        "closed": fs.closed,
+    }
