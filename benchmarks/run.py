@@ -597,34 +597,32 @@ def bench_render(quick: bool) -> list[Row]:
 
 # ------------------------------------------------------------------------------ campaign
 def bench_campaign(quick: bool, results: Path = ROOT / "results") -> list[Row]:
-    """Stage times snakemake recorded (``benchmark:`` TSVs) in ``results/*/benchmarks/``."""
+    """Whole campaigns: wall and CPU time per stage, summed over its jobs, as Snakemake
+    recorded them (``results/*/benchmarks/``, read by :mod:`scenebot.timing`; not re-measured).
+    """
+    from scenebot.timing import by_stage, read_benchmarks
+
     rows = []
-    for tsv in sorted(Path(results).glob("*/benchmarks/**/*.tsv")):
-        lines = [ln.split("\t") for ln in tsv.read_text().splitlines() if ln.strip()]
-        if len(lines) < 2:
+    for bench in sorted(Path(results).glob("*/benchmarks")):
+        jobs = read_benchmarks(bench)
+        if not jobs:
             continue
-        head = lines[0]
-        vals = [dict(zip(head, ln, strict=False)) for ln in lines[1:]]
-        try:
-            secs = [float(v["s"]) for v in vals]
-        except (KeyError, ValueError):
-            continue
-        scene = tsv.relative_to(results).parts[0]
-        stage = tsv.relative_to(Path(results) / scene / "benchmarks").with_suffix("")
-        note = "recorded by snakemake when the campaign ran (not re-measured)"
-        try:
-            cpu = statistics.median(float(v["cpu_time"]) for v in vals)
-            rss = statistics.median(float(v["max_rss"]) for v in vals)
-            note = f"CPU {cpu:.0f} s, max RSS {rss:.0f} MB; " + note
-        except (KeyError, ValueError):
-            pass
-        mtime = dt.datetime.fromtimestamp(tsv.stat().st_mtime, dt.UTC).strftime("%Y-%m-%d %H:%M")
-        rows.append(Row("campaign", f"{scene}: {stage}", statistics.median(secs), "s",
-                        len(secs), note=f"{note}, {mtime} UTC"))  # fmt: skip
-    if rows:
-        total = sum(r.median for r in rows if r.name.split(": ")[0] == rows[0].name.split(": ")[0])
-        rows.append(Row("campaign", f"{rows[0].name.split(': ')[0]}: all stages recorded", total,
-                        "s", 1, note="sum of the medians above"))  # fmt: skip
+        scene = bench.parent.name
+        newest = max(p.stat().st_mtime for p in bench.glob("**/*.tsv"))
+        when = dt.datetime.fromtimestamp(newest, dt.UTC).strftime("%Y-%m-%d %H:%M")
+        stages = by_stage(jobs)
+        for name, st in stages.items():
+            rows.append(Row(
+                "campaign", f"{scene}: {name} ({st['jobs']} jobs)", st["seconds"], "s", 1,
+                note=f"CPU {st['cpu_seconds']:.0f} s, CPU/wall {st['cpu_per_wall']}, max RSS "
+                f"{st['max_rss_mb']:.0f} MB; recorded by snakemake, last job {when} UTC",
+                cpu_wall=st["cpu_per_wall"],
+            ))  # fmt: skip
+        wall = sum(st["seconds"] for st in stages.values())
+        cpu = sum(st["cpu_seconds"] for st in stages.values())
+        rows.append(Row("campaign", f"{scene}: all jobs", wall, "s", 1,
+                        note=f"CPU {cpu:.0f} s; sum of the jobs' wall times",
+                        cpu_wall=round(cpu / wall, 2) if wall else None))  # fmt: skip
     return rows
 
 

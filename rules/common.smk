@@ -60,6 +60,11 @@ PHOTOS = CFG.robot == "photos"  # bring-your-own photos: round 0 is a folder, no
 def campaign_targets(wildcards):
     """What `snakemake` builds by default: the whole campaign, its products and (simulated
     robots) its evaluation against the truth, per round and final."""
+    return [*timed_products(wildcards), f"{RESULTS}/timing.json"]
+
+
+def timed_products(wildcards):
+    """The campaign's products whose jobs' times timing.json sums (every target but itself)."""
     targets = [
         f"{RESULTS}/campaign.json",
         f"{RESULTS}/final/dense/fused.ply",

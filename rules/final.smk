@@ -68,3 +68,28 @@ rule dense:
     shell:
         "{params.py:q} -m scenebot dense --params {params.cfg:q} --sparse {params.sparse:q} "
         "--images {params.images:q} --out {params.out:q} 2> >(tee {log:q} >&2)"
+
+
+# Where the campaign's time went, from the benchmark file Snakemake writes for every job.
+rule timing:
+    input:
+        code=stage_code("timing"),
+        products=timed_products,
+    output:
+        json=f"{RESULTS}/timing.json",
+        png=report(
+            f"{RESULTS}/timing.png",
+            caption="../report/timing.rst",
+            category="4. Campaign",
+        ),
+    log:
+        f"{RESULTS}/logs/timing.log",
+    localrule: True
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        benchmarks=f"{RESULTS}/benchmarks",
+    shell:
+        "{params.py:q} -m scenebot timing --benchmarks {params.benchmarks:q} "
+        "--out {output.json:q} --png {output.png:q} 2> >(tee {log:q} >&2)"

@@ -159,6 +159,14 @@ def cmd_campaign(args) -> int:
     return 0
 
 
+def cmd_timing(args) -> int:
+    from scenebot.timing import write
+
+    doc = write(Path(args.benchmarks), Path(args.out), Path(args.png) if args.png else None)
+    print(json.dumps({k: doc[k] for k in ("jobs_seconds", "jobs_cpu_seconds", "cpu_per_wall")}))
+    return 0
+
+
 def cmd_nxt_emulator(args) -> int:
     from scenebot.robot.factory import make_emulator_world
     from scenebot.robot.nxt.backend import serve_emulator
@@ -243,6 +251,12 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--rounds", required=True, help="the rounds run, e.g. 0,1,2")
     cp.add_argument("--out", required=True, help="results/<scene>/campaign.json")
     cp.set_defaults(func=cmd_campaign)
+
+    tm = sub.add_parser("timing", help="where a campaign's time went (Snakemake's benchmarks)")
+    tm.add_argument("--benchmarks", required=True, help="results/<scene>/benchmarks")
+    tm.add_argument("--out", required=True, help="results/<scene>/timing.json")
+    tm.add_argument("--png", help="results/<scene>/timing.png")
+    tm.set_defaults(func=cmd_timing)
 
     e = sub.add_parser(
         "nxt-emulator",
