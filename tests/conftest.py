@@ -37,3 +37,34 @@ def no_noise_cfg(sim_cfg) -> SimConfig:
     sim_cfg.sensors.compass_noise_deg = 0.0
     sim_cfg.sensors.ultrasonic_noise_cm = 0.0
     return sim_cfg
+
+
+def _gpu_arch() -> str | None:
+    """The GPU arch taichi starts on here (``cuda`` or ``vulkan``), or None; asked in a
+    subprocess so that this process's taichi stays unstarted."""
+    import subprocess
+    import sys
+
+    code = (
+        "import taichi as ti; ti.init(arch=[ti.cuda, ti.vulkan], log_level=ti.ERROR); "
+        "print(ti.lang.impl.current_cfg().arch.name)"
+    )
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=120, check=False)  # fmt: skip
+    except subprocess.TimeoutExpired:
+        return None
+    arch = out.stdout.strip().splitlines()[-1] if out.stdout.strip() else ""
+    return arch if arch in ("cuda", "vulkan") else None
+
+
+@pytest.hookimpl(trylast=True)  # after -m has deselected: no GPU probe when no gpu test runs
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``gpu`` are skipped, saying so, where taichi finds no CUDA or Vulkan
+    device (they would otherwise fail on the CPU fallback)."""
+    gpu_items = [item for item in items if item.get_closest_marker("gpu")]
+    if not gpu_items or _gpu_arch() is not None:
+        return
+    skip = pytest.mark.skip(reason="no CUDA or Vulkan device for taichi on this machine")
+    for item in gpu_items:
+        item.add_marker(skip)
