@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pycolmap
@@ -429,3 +430,19 @@ def test_photos_registered_off_their_compass_heading_are_left_out():
         if p.compass_deg is not None:
             p.compass_deg = (p.compass_deg - 90.0) % 360
     assert set(drop_off_compass(rec, photos, 12.0, camera_yaw_deg=90.0)) == set()
+
+
+@pytest.mark.parametrize("theta", [0.0, 1.0, 4.0])
+def test_the_robots_estimate_as_a_camera_pose(theta):
+    """A photo's prior pose from the robot's (x, y, theta): the camera the synthetic room
+    puts there (level, looking ahead, 10 cm in front of the rotation axis)."""
+    from scenebot.sfm.register import camera_priors
+    from scenebot.testing.sfm import SyntheticRoom
+
+    room = SyntheticRoom(camera_offset_m=(0.10, 0.02))
+    R, c = room.cam_from_world(1.5, 2.0, theta)
+    photo = Photo("a.jpg", Path("a.jpg"), localization=(1.5, 2.0, theta))
+    pose = camera_priors([photo], (0.10, 0.02), 0.0, room.camera_height_m)["a.jpg"]
+    assert np.allclose(pose.rotation.matrix(), R, atol=1e-12)
+    assert np.allclose(pose.inverse().translation, c, atol=1e-12)
+    assert camera_priors([Photo("b.jpg", Path("b.jpg"))], None, 0.0, 0.0) == {}

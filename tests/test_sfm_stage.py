@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import shutil
 
 import numpy as np
 import pycolmap
@@ -246,33 +247,183 @@ def test_photos_off_their_circle_are_moved_back(round0):
     assert np.median(others) < 0.005
 
 
-@pytest.mark.slow
-def test_round_update_is_incremental_and_accurate(round0, room):
-    base, cap0, out0, _, _ = round0
+@pytest.fixture(scope="module")
+def round1(round0, room):
+    """A second, adaptive round: two more circles, each photo with the robot's visual fix
+    (the true pose in the map frame, 5 mm noise), in the round-0 scene folder. Returns its
+    capture folder and a function copying it into another scene folder with the fixes
+    offset by ``bias`` (m) (the same photos: the database's features stay valid)."""
+    base, cap0, *_ = round0
+    first = json.loads((cap0 / "log.jsonl").read_text().splitlines()[1])
+    origin = (first["truth"]["robot"]["x"], first["truth"]["robot"]["y"])
+
+    def make(folder, bias=(0.0, 0.0)):
+        make_capture(
+            folder, room, n_spots=2, start_spot=2, round_index=1, seed=9, map_origin=origin,
+            localization_bias_m=bias,
+        )  # fmt: skip
+
     cap1 = base / "round_001" / "capture"
-    make_capture(cap1, room, n_spots=2, start_spot=2, round_index=1, seed=9)
-    cfg = SfmConfig(exhaustive_max_images=10)
-    out1 = SfmOutputs(base / "round_001" / "sfm")
-    report = run(
-        cfg,
-        SfmInputs(base / "sfm_db" / "database.db", [cap0, cap1], previous_model=out0.model_dir),
-        out1,
-    )
-    assert report["mapping_mode"] == "incremental"
-    assert report["features"] == {"new": 24, "reused": 36, "no_features": []}
-    assert report["registered"] == 60
+    make(cap1)
+
+    def biased(scene, bias):
+        make(scene / "biased", bias)
+        shutil.copytree(cap1, scene / "round_001" / "capture")
+        shutil.copy(scene / "biased" / "log.jsonl", scene / "round_001" / "capture")
+        return scene / "round_001" / "capture"
+
+    return cap1, biased
+
+
+def _run_round1(base, cap0, cap1, out0, name, **settings):
+    """Round 1 mapped onto round 0's map; the fast path (sfm.register_new_photos) unless the
+    settings say otherwise (it is off by default until measured beyond the office)."""
+    settings = {"register_new_photos": True, **settings}
+    cfg = SfmConfig(exhaustive_max_images=10, num_threads=1, **settings)
+    out1 = SfmOutputs(base / name)
+    inputs = SfmInputs(base / "sfm_db" / "database.db", [cap0, cap1], previous_model=out0)
+    report = run(cfg, inputs, out1)
     acc = json.loads(out1.accuracy.read_text())
-    assert acc["position_error_m"]["median"] < 0.03 and acc["metric_scale_error"] < 0.03
-    # the robot frame stays put: round 0 photos moved little between the two maps
+    new = {p["name"]: p["position_error_m"] for p in acc["per_photo"] if "round_001" in p["name"]}
+    return report, out1, new
+
+
+def _shift_of_previous_photos(out0, out1):
     r0 = pycolmap.Reconstruction(str(out0.model_dir))
     r1 = pycolmap.Reconstruction(str(out1.model_dir))
     c0 = {r0.image(i).name: r0.image(i).projection_center() for i in r0.reg_image_ids()}
-    shift = [
+    return [
         np.linalg.norm(r1.image(i).projection_center() - c0[r1.image(i).name])
         for i in r1.reg_image_ids()
         if r1.image(i).name in c0
     ]
-    assert np.median(shift) < 0.05
+
+
+@pytest.fixture(scope="module")
+def round1_map(round0, round1):
+    """Round 1 mapped with the fast path (the new photos registered into round 0's map)."""
+    base, cap0, out0, _, _ = round0
+    return _run_round1(base, cap0, round1[0], out0.model_dir, "round_001/sfm")
+
+
+def test_round_update_registers_the_new_photos_into_the_previous_map(round0, round1_map):
+    """The fast path: every new photo registered within 2 cm of its true pose (320x240),
+    the previous photos where they were, and no global refinement: the residuals and the
+    robot's fixes agree with the map."""
+    out0 = round0[2]
+    report, out1, new = round1_map
+    assert report["mapping_mode"] == "registered"
+    assert report["features"] == {"new": 24, "reused": 36, "no_features": []}
+    assert report["registered"] == 60 and len(new) == 24
+    assert max(new.values()) < 0.02 and np.median(list(new.values())) < 0.01
+    checks = report["global_refinement"]
+    assert checks["run"] is False and checks["reasons"] == []
+    assert checks["residual_ratio"] < SfmConfig().max_residual_ratio
+    assert checks["photos_with_fix"] == 24 and checks["fix_offset_median_m"] < 0.03
+    assert "global_refinement" not in report["timings_s"]
+    assert report["refinement"]["fixed_previous_photos"] == 36
+    # only the re-fitted alignment (odometry scale with the new round) moves the old photos
+    assert np.median(_shift_of_previous_photos(out0, out1)) < 0.01
+
+
+def test_a_wrong_registration_is_corrected_from_the_robots_estimate(round0, round1, monkeypatch):
+    """Every other new photo comes out of RANSAC turned by 3 deg and 20 cm off (a far wall's
+    ambiguity); refined from the robot's fix it explains more matches and is kept."""
+    import scenebot.sfm.register as register
+
+    real = register._register_next
+
+    def misplaced(mapper, mopts, structure_less):
+        iid = real(mapper, mopts, structure_less)
+        if iid is not None and iid % 2 == 0:
+            frame = mapper.reconstruction.frame(mapper.reconstruction.image(iid).frame_id)
+            turn = pycolmap.Rigid3d(pycolmap.Rotation3d(np.array([0.0, 0.05, 0.0])), [0.2, 0, 0])
+            frame.rig_from_world = turn * frame.rig_from_world
+        return iid
+
+    monkeypatch.setattr(register, "_register_next", misplaced)
+    base, cap0, out0, _, _ = round0
+    report, _, new = _run_round1(base, cap0, round1[0], out0.model_dir, "misplaced")
+    assert report["refinement"]["poses_from_robot_estimate"] >= 12
+    assert len(new) == 24 and max(new.values()) < 0.02
+
+
+def test_fixes_away_from_the_map_make_the_global_refinement_run(round0, round1, tmp_path):
+    """The robot's fixes 10 cm off the map (beyond what the localization's accuracy
+    explains): the global refinement runs; the new photos stay where the photos put them."""
+    base = round0[0]
+    scene = tmp_path / "scene"
+    shutil.copytree(base / "round_000", scene / "round_000")
+    shutil.copytree(base / "sfm_db", scene / "sfm_db")
+    cap1 = round1[1](scene, bias=(0.10, 0.0))
+    report, _, new = _run_round1(
+        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1"
+    )
+    checks = report["global_refinement"]
+    assert report["mapping_mode"] == "registered+global" and checks["run"]
+    assert "sfm.max_fix_offset_m" in checks["reasons"][0]
+    assert 0.08 < checks["fix_offset_median_m"] < 0.12
+    assert report["timings_s"]["global_refinement"] > 0
+    assert report["refinement"]["registration"]["registered_now"] == 24
+    assert len(new) == 24 and max(new.values()) < 0.02
+
+
+def test_new_photos_the_map_cannot_explain_ask_for_the_global_refinement(
+    round0, round1, round1_map
+):
+    """The residual check: the new photos of a registered model turned by 0.3 deg fit their
+    points worse than the previous photos do (sfm.max_residual_ratio)."""
+    from scenebot.sfm.mapping import ObservationTable
+    from scenebot.sfm.photos import photos_from_captures
+    from scenebot.sfm.register import _points_of, global_refinement_checks, residual_ratio
+
+    cap0 = round0[1]
+    rec = pycolmap.Reconstruction(str(round1_map[1].model_dir))
+    _, photos = photos_from_captures([cap0, round1[0]])
+    new = [i for i in rec.reg_image_ids() if "round_001" in rec.image(i).name]
+    points = _points_of(rec, new)
+    table = ObservationTable(rec, point_ids=points)
+    cfg = SfmConfig()
+    ratio = residual_ratio(rec, table, new)
+    assert ratio < cfg.max_residual_ratio
+    assert not global_refinement_checks(rec, new, ratio, photos, (0.1, 0.0), cfg)["run"]
+    for i in new:
+        frame = rec.frame(rec.image(i).frame_id)
+        turn = pycolmap.Rigid3d(pycolmap.Rotation3d(np.array([0.0, 0.005, 0.0])), [0, 0, 0])
+        frame.rig_from_world = turn * frame.rig_from_world
+    ratio = residual_ratio(rec, ObservationTable(rec, point_ids=points), new)
+    checks = global_refinement_checks(rec, new, ratio, photos, (0.1, 0.0), cfg)
+    assert ratio > cfg.max_residual_ratio and checks["run"]
+    assert "sfm.max_residual_ratio" in checks["reasons"][0]
+
+
+@pytest.mark.slow
+def test_round_update_without_registration_continues_the_incremental_mapper(round0, round1):
+    """sfm.register_new_photos off: COLMAP's incremental mapper continues from the previous
+    model and the whole map is refined (the slow path)."""
+    base, cap0, out0, _, _ = round0
+    report, out1, new = _run_round1(
+        base, cap0, round1[0], out0.model_dir, "slow_path", register_new_photos=False
+    )
+    assert report["mapping_mode"] == "incremental" and report["global_refinement"] == {}
+    assert report["registered"] == 60 and max(new.values()) < 0.03
+    acc = json.loads(out1.accuracy.read_text())
+    assert acc["position_error_m"]["median"] < 0.03 and acc["metric_scale_error"] < 0.03
+    assert np.median(_shift_of_previous_photos(out0, out1)) < 0.05
+
+
+@pytest.mark.slow
+def test_too_few_new_photos_registered_falls_back_to_the_incremental_mapper(
+    round0, round1, monkeypatch
+):
+    """No new photo registers into the previous map: COLMAP's incremental mapper continues
+    from it instead."""
+    import scenebot.sfm.register as register
+
+    monkeypatch.setattr(register, "_register_next", lambda *args: None)
+    base, cap0, out0, _, _ = round0
+    report, _, _ = _run_round1(base, cap0, round1[0], out0.model_dir, "fallback")
+    assert report["mapping_mode"] == "incremental" and report["registered"] == 60
 
 
 @pytest.mark.slow

@@ -159,6 +159,56 @@ class SfmConfig(Settings):
             "the final refinement still adjusts all poses."
         ),
     )
+    register_new_photos: bool = Field(
+        False,
+        description=(
+            "Round r > 0: register the new photos into round r-1's map (absolute pose from "
+            "their matches to its points, triangulation, local bundle adjustment; the "
+            "previous photos' poses and the intrinsics held) and refine only them robustly; "
+            "the global refinement (sfm.retriangulate, sfm.refine_iterations over the whole "
+            "map) runs only when sfm.max_residual_ratio or sfm.max_fix_offset_m say so. "
+            "Falls back to the incremental mapper when fewer than min_registered_share of "
+            "the new photos register. False: the incremental mapper and the global "
+            "refinement every round (office, 25 new photos on 220: ~2 min on 2 cores). Off "
+            "by default until measured beyond the office: there, rounds 1-6 took 33-56 s "
+            "instead of 114-166 s (2 loaded cores), registered as many photos or more, with "
+            "smaller worst errors but a median 0.4 cm worse in round 5 (issue 22)."
+        ),
+    )
+    register_ba_function_tolerance: float = Field(
+        1e-5,
+        gt=0.0,
+        description=(
+            "With sfm.register_new_photos: the robust bundle adjustment of the new photos "
+            "stops when an iteration lowers the cost by less than this share (Ceres "
+            "function_tolerance; 0 would run to 100 iterations: office round 6, the first "
+            "adjustment 101 iterations and 3x the time for the same poses to 0.1 mm)."
+        ),
+    )
+    max_residual_ratio: float = Field(
+        1.25,
+        gt=1.0,
+        description=(
+            "With sfm.register_new_photos: the global refinement runs when the median "
+            "reprojection error of the new photos' observations exceeds this multiple of "
+            "that of the previous photos' observations of the same points (after the new "
+            "photos' refinement, both filtered at refine_max_error_px): the held map cannot "
+            "explain the new views. Freshly fitted, the new observations err less (office "
+            "rounds 1-6: 0.75-0.96)."
+        ),
+    )
+    max_fix_offset_m: float = Field(
+        0.05,
+        ge=0.0,
+        description=(
+            "With sfm.register_new_photos: the global refinement runs when the new photos "
+            "registered farther than this (m) from where the robot's visual localization "
+            "fix of each photo put its camera, in the median over the new photos with a fix "
+            "of their own (3 at least). Fixes at localize.max_position_std_m = 0.02 m err "
+            "by 2.4 cm in the median (planar, Rayleigh); office rounds 1-6: 0.5-1.8 cm. "
+            "0 turns the check off."
+        ),
+    )
     retriangulate: bool = Field(
         True,
         description=(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import logging
 import shutil
 import time
@@ -27,13 +28,17 @@ class MappingResult:
 
     Attributes:
         reconstruction: the largest model.
-        mode: ``"scratch"``, ``"incremental"`` or ``"incremental->scratch"`` (fallback).
+        mode: ``"scratch"``, ``"incremental"``, ``"incremental->scratch"`` (fallback),
+            ``"registered"`` (the new photos registered into the previous model, see
+            :mod:`scenebot.sfm.register`) or ``"registered+global"`` (and the global
+            refinement run after it).
         num_models: how many models mapping produced.
         dropped: photo name -> reason, for photos not in the kept model.
         seconds: wall time of mapping.
         refinement: stats of the final robust refinement (empty when off).
         attempts: mapping runs from scratch (``cfg.mapping_attempts`` at most; 0 when
             continuing from the previous model sufficed).
+        new_ids: ``registered`` modes: image ids of the photos registered now.
     """
 
     reconstruction: pycolmap.Reconstruction
@@ -43,42 +48,130 @@ class MappingResult:
     seconds: float = 0.0
     refinement: dict = field(default_factory=dict)
     attempts: int = 0
+    new_ids: list[int] = field(default_factory=list)
+
+    @property
+    def continued(self) -> bool:
+        """The model grew from the previous round's, whose photo poses it keeps."""
+        return self.mode in CONTINUED_MODES
 
 
-def filter_observations(rec: pycolmap.Reconstruction, max_error_px: float) -> int:
-    """Delete observations whose reprojection error exceeds ``max_error_px`` (px) and points
-    that are not finite or lie far outside the cameras' extent.
+CONTINUED_MODES = ("incremental", "registered", "registered+global")
+"""Mapping modes that continue from the previous round's model."""
 
-    Returns:
-        The number of observations deleted.
+
+class ObservationTable:
+    """The observations of registered images as arrays (image id, point2D index, 3D point
+    id, pixel position): reading them from pycolmap point by point costs about a second per
+    pass on a 200-photo map, so a refinement reads them once and filters them repeatedly.
+
+    Args:
+        rec: the model.
+        image_ids: the images whose observations are read (default: all registered).
+        point_ids: only observations of these 3D points (default: all).
     """
+
+    def __init__(
+        self,
+        rec: pycolmap.Reconstruction,
+        image_ids=None,
+        point_ids: set[int] | None = None,
+    ) -> None:
+        rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        for iid in rec.reg_image_ids() if image_ids is None else image_ids:
+            im = rec.image(iid)
+            pts = im.get_observation_points2D()
+            if not len(pts):
+                continue
+            idx = np.asarray(im.get_observation_point2D_idxs(), np.int64)
+            ids = np.array([p.point3D_id for p in pts], np.int64)
+            xy = np.array([p.xy for p in pts])
+            if point_ids is not None:
+                keep = np.isin(ids, np.fromiter(point_ids, np.int64, len(point_ids)))
+                idx, ids, xy = idx[keep], ids[keep], xy[keep]
+            rows.append((np.full(len(idx), iid, np.int64), idx, ids, xy))
+        empty = (np.zeros(0, np.int64),) * 3 + (np.zeros((0, 2)),)
+        cols = list(zip(*rows, strict=True)) if rows else [[c] for c in empty]
+        self.image_ids, self.point2D_idx, self.point3D_ids, self.xy = (
+            np.concatenate(c) for c in cols
+        )
+
+    def __len__(self) -> int:
+        return len(self.image_ids)
+
+    def _keep(self, sel: np.ndarray) -> None:
+        self.image_ids, self.point2D_idx = self.image_ids[sel], self.point2D_idx[sel]
+        self.point3D_ids, self.xy = self.point3D_ids[sel], self.xy[sel]
+
+    def errors(self, rec: pycolmap.Reconstruction) -> np.ndarray:
+        """Reprojection errors (px) at the current poses and points, ``inf`` behind the
+        camera; rows whose point or image is gone are dropped first."""
+        pids, inverse = np.unique(self.point3D_ids, return_inverse=True)
+        exists = np.array([rec.exists_point3D(int(p)) for p in pids], bool)
+        alive = exists[inverse] & np.isin(
+            self.image_ids, np.fromiter(rec.reg_image_ids(), np.int64)
+        )
+        xyz = np.zeros((len(pids), 3))
+        xyz[exists] = [rec.point3D(int(p)).xyz for p in pids[exists]]
+        X = xyz[inverse[alive]]
+        self._keep(alive)
+        err = np.empty(len(self))
+        starts = np.r_[0, np.flatnonzero(np.diff(self.image_ids)) + 1, len(self)]
+        for a, b in itertools.pairwise(starts):  # rows grouped by image
+            im = rec.image(int(self.image_ids[a]))
+            cam_pts = im.cam_from_world() * X[a:b]
+            uv = im.camera.img_from_cam(cam_pts, check_cheirality=False)
+            err[a:b] = np.linalg.norm(uv - self.xy[a:b], axis=1)
+            err[a:b][cam_pts[:, 2] <= 0] = np.inf
+        return err
+
+    def delete_beyond(self, rec: pycolmap.Reconstruction, max_error_px: float) -> int:
+        """Delete the observations whose reprojection error exceeds ``max_error_px`` (px)
+        or is not finite from ``rec`` and the table; returns how many."""
+        err = self.errors(rec)
+        bad = ~(err <= max_error_px)
+        for iid, k in zip(self.image_ids[bad], self.point2D_idx[bad], strict=True):
+            if rec.image(int(iid)).point2D(int(k)).has_point3D():
+                rec.delete_observation(int(iid), int(k))
+        self._keep(~bad)
+        return int(bad.sum())
+
+
+def delete_far_points(rec: pycolmap.Reconstruction, point_ids: set[int] | None = None) -> int:
+    """Delete the 3D points (of ``point_ids``, default all) that are not finite or lie
+    farther than 1000 times the cameras' extent from their median centre; returns how
+    many."""
     centers = np.array([rec.image(i).projection_center() for i in rec.reg_image_ids()])
     mid = np.median(centers, 0)
     extent = max(float(np.max(np.linalg.norm(centers - mid, axis=1))), 1e-9)
     far = [
         pid
         for pid, pt in rec.points3D.items()
-        if not np.all(np.isfinite(pt.xyz)) or np.linalg.norm(pt.xyz - mid) > 1000 * extent
+        if (point_ids is None or pid in point_ids)
+        and (not np.all(np.isfinite(pt.xyz)) or np.linalg.norm(pt.xyz - mid) > 1000 * extent)
     ]
     for pid in far:
         rec.delete_point3D(pid)
-    bad: list[tuple[int, int]] = []
-    for iid in rec.reg_image_ids():
-        im = rec.image(iid)
-        idx = [k for k, p2 in enumerate(im.points2D) if p2.has_point3D()]
-        if not idx:
-            continue
-        xyz = np.array([rec.point3D(im.points2D[k].point3D_id).xyz for k in idx])
-        cam_pts = im.cam_from_world() * xyz
-        uv = im.camera.img_from_cam(cam_pts, check_cheirality=False)
-        obs = np.array([im.points2D[k].xy for k in idx])
-        err = np.linalg.norm(uv - obs, axis=1)
-        err[cam_pts[:, 2] <= 0] = np.inf
-        bad += [(iid, idx[k]) for k in np.flatnonzero(~(err <= max_error_px))]
-    for iid, k in bad:
-        if rec.image(iid).points2D[k].has_point3D():
-            rec.delete_observation(iid, k)
-    return len(bad) + len(far)
+    return len(far)
+
+
+def filter_observations(
+    rec: pycolmap.Reconstruction,
+    max_error_px: float,
+    table: ObservationTable | None = None,
+    point_ids: set[int] | None = None,
+) -> int:
+    """Delete observations whose reprojection error exceeds ``max_error_px`` (px) and points
+    that are not finite or lie far outside the cameras' extent; with ``table``, only the
+    observations it holds (and it is updated), with ``point_ids`` only those points.
+
+    Returns:
+        The number of observations deleted.
+    """
+    far = delete_far_points(rec, point_ids)
+    if table is None:
+        table = ObservationTable(rec, point_ids=point_ids)
+    return table.delete_beyond(rec, max_error_px) + far
 
 
 def robust_refinement(
@@ -108,13 +201,14 @@ def robust_refinement(
     if relax_first:
         opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
         _adjust(rec, opts, constant_names)
+    table = ObservationTable(rec)
     for _ in range(iterations):
-        removed += filter_observations(rec, max_error_px)
+        removed += filter_observations(rec, max_error_px, table)
         opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
         opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
         opts.ceres.loss_function_scale = 1.0
         _adjust(rec, opts, constant_names)
-    removed += filter_observations(rec, max_error_px)
+    removed += filter_observations(rec, max_error_px, table)
     return {
         "observations_removed": removed,
         "reprojection_error_before_px": before,
@@ -332,14 +426,33 @@ def map_photos(
         kept_previous = frozenset(
             best.image(i).name for i in best.reg_image_ids() if best.image(i).name in prev_names
         )
-    dropped = _dropped(db_path, names, ranked, cfg)
+    dropped = dropped_photos(db_path, names, ranked, cfg)
+    res = MappingResult(best, mode, len(ranked), dropped, attempts=attempts)
+    refine_globally(res, db_path, image_root, work, cfg, names, fix_focal, kept_previous)
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
+def refine_globally(
+    res: MappingResult,
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    cfg: SfmConfig,
+    names: list[str],
+    fix_focal: bool,
+    kept_previous: frozenset[str],
+) -> None:
+    """The global refinement of ``res.reconstruction`` (replaced): every track
+    re-triangulated from the database (``cfg.retriangulate``), then the robust bundle
+    adjustment of the whole model (``cfg.refine_iterations``; its stats into
+    ``res.refinement``), the poses of ``kept_previous`` held."""
     if cfg.retriangulate:
-        best = _retriangulate(best, db_path, image_root, work, cfg, names, fix_focal)
-    refinement = {}
+        res.reconstruction = _retriangulate(
+            res.reconstruction, db_path, image_root, work, cfg, names, fix_focal
+        )
     if cfg.refine_iterations > 0:
-        refinement = _refine(best, cfg, fix_focal, kept_previous)
-    seconds = time.perf_counter() - t0
-    return MappingResult(best, mode, len(ranked), dropped, seconds, refinement, attempts)
+        res.refinement = _refine(res.reconstruction, cfg, fix_focal, kept_previous)
 
 
 def _continue(
@@ -378,7 +491,7 @@ def _continue(
     return models, "incremental"
 
 
-def _dropped(
+def dropped_photos(
     db_path: Path, names: list[str], ranked: list[pycolmap.Reconstruction], cfg: SfmConfig
 ) -> dict[str, str]:
     """Why each photo is not in the largest model ``ranked[0]``; warns when mapping split."""

@@ -47,7 +47,10 @@ class Photo:
         focal_source: how ``focal_px`` was found (``exif_focal_plane``, ``exif_35mm``, ``none``).
         odometry: ``(x, y, theta)`` (m, m, rad) in the round's odometry frame, or ``None``.
         compass_deg: compass heading (deg, counter-clockwise) or ``None``.
-        localization: ``(x, y, theta)`` visual localization estimate (robot frame) or ``None``.
+        localization: ``(x, y, theta)`` the robot's own map-frame estimate (robot frame) or
+            ``None``: its visual fix of this photo, or the last fix carried by odometry.
+        localization_fix: ``localization`` is a visual fix of this very photo (the log's
+            ``localization_source`` is ``this photo``, or absent).
         truth: the simulator's true pose record (evaluation only), or ``None``.
     """
 
@@ -62,6 +65,7 @@ class Photo:
     odometry: tuple[float, float, float] | None = None
     compass_deg: float | None = None
     localization: tuple[float, float, float] | None = None
+    localization_fix: bool = False
     truth: dict | None = field(default=None, repr=False)
 
 
@@ -198,6 +202,8 @@ def photos_from_captures(capture_dirs: list[Path]) -> tuple[Path, list[Photo]]:
                         float(rec["compass_deg"]) if rec.get("compass_deg") is not None else None
                     ),
                     localization=_pose3(rec.get("localization")),
+                    localization_fix=_pose3(rec.get("localization")) is not None
+                    and rec.get("localization_source", "this photo") == "this photo",
                     truth=rec.get("truth"),
                 )
             )

@@ -4,8 +4,11 @@ Round r: a COLMAP model of ALL photos of rounds 0..r in the robot frame, written
 ``results/{scene}/round_{r}/sfm/`` with ``point_descriptors.npz``, ``report.json``,
 ``accuracy.json`` (+ ``accuracy.png``) and ``map.png``. Features and matches live in one
 persistent database per scene (``results/{scene}/sfm_db/database.db`` in the workflow), so a
-round extracts features only of its new photos and matches only new pairs; mapping continues
-from round r-1's model (``inputs.previous_model``) with a from-scratch fallback.
+round extracts features only of its new photos and matches only new pairs. Round r > 0
+registers its new photos into round r-1's model (``inputs.previous_model``,
+:mod:`scenebot.sfm.register`) and refines the whole map only when the new photos' residuals
+or the robot's localization fixes say so; when too few register, COLMAP's incremental mapper
+continues from the model, with a from-scratch fallback.
 
 With the camera's lever arm (``cfg.camera_offset_m``) the metric scale comes from the circles
 of photos turned in place, and a final bundle adjustment holds every circle photo on its
@@ -32,9 +35,16 @@ from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.descriptors import collect_point_descriptors, write_point_descriptors
 from scenebot.sfm.evaluate import evaluate_accuracy
 from scenebot.sfm.features import check_database_photos, extract, match_pairs, open_database
-from scenebot.sfm.mapping import MappingResult, SfmError, map_photos, mapping_options
+from scenebot.sfm.mapping import (
+    MappingResult,
+    SfmError,
+    map_photos,
+    mapping_options,
+    refine_globally,
+)
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
+from scenebot.sfm.register import camera_xy, global_refinement_checks, map_new_photos
 
 log = logging.getLogger(__name__)
 
@@ -187,16 +197,13 @@ def drop_misplaced(
     """
     if max_deviation_m <= 0:
         return {}
-    fwd, left = (0.0, 0.0) if camera_offset_m is None else map(float, camera_offset_m)
     by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
     out: dict[str, float] = {}
     for p in photos:
         iid = by_name.get(p.name)
         if iid is None or p.localization is None:
             continue
-        x, y, th = p.localization
-        c, s_ = math.cos(th), math.sin(th)
-        expect = np.array([x + fwd * c - left * s_, y + fwd * s_ + left * c])
+        expect = camera_xy(p.localization, camera_offset_m)
         d = float(np.linalg.norm(rec.image(iid).projection_center()[:2] - expect))
         if d > max_deviation_m:
             rec.deregister_frame(rec.image(iid).frame_id)
@@ -304,7 +311,7 @@ def _remap_while_circles_disagree(
     """
     cfg = s.cfg
     spread = circle_scale_spread(alignment)
-    if spread is None or mres.mode == "incremental":
+    if spread is None or mres.continued:
         return mres, alignment, []
     first_seed = cfg.random_seed + max(mres.attempts, 1) - 1
     runs = [
@@ -384,7 +391,9 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         The report (also written to ``report.json``): counts, dropped photos with reasons,
         pair counts, timings (s), alignment, ``scale`` (the source used, the lever-arm and
         odometry estimates and their relative difference, per-circle fits),
-        ``circle_priors`` (photos moved back onto their circle, residuals), accuracy summary.
+        ``circle_priors`` (photos moved back onto their circle, residuals), accuracy summary,
+        ``global_refinement`` (round updates registered into the previous map: the checks,
+        whether and why the whole map was refined).
 
     Raises:
         PhotoError: fewer than 3 photos, corrupt or truncated JPEGs (named).
@@ -394,22 +403,23 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     s = _open_session(cfg, inputs)
     features, pairs = _features_and_pairs(s)
     s.fix_focal = _focal_fixed(cfg, s.photos)
-    mres = map_photos(
-        s.db_path, s.root, s.names, s.work / "mapping", cfg, s.previous, fix_focal=s.fix_focal
-    )
-    s.timings["map"] = mres.seconds
+    mres = _map(s)
     _check_registered(cfg, mres, len(s.photos))
 
     mres, alignment, scale_checks = _align(s, mres)
-    rec = mres.reconstruction
     _log_not_in_map(mres.dropped)
     t = time.perf_counter()
-    align_to_robot_frame(rec, alignment)
+    align_to_robot_frame(mres.reconstruction, alignment)
     s.timings["align"] += time.perf_counter() - t
-    _drop_inconsistent_photos(s, rec, alignment, mres.dropped)
     first = alignment  # the metric scale found on the mapped model (report.json "scale")
     total_scale = alignment.scale
-    rec, on_circles, circle_stats = _hold_photos_on_circles(s, rec, alignment, mres.mode)
+    checks, realigned = _refine_globally_if_needed(s, mres, alignment)
+    if realigned is not None:
+        alignment = realigned
+        total_scale *= alignment.scale
+    rec = mres.reconstruction
+    _drop_inconsistent_photos(s, rec, alignment, mres.dropped)
+    rec, on_circles, circle_stats = _hold_photos_on_circles(s, rec, alignment, mres.continued)
     if on_circles is not None:
         alignment = on_circles
         total_scale *= alignment.scale
@@ -422,6 +432,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     s.timings["total"] = time.perf_counter() - t_start
     scale = _scale_report(first, total_scale, scale_checks)
     report = _report(s, rec, mres, features, pairs, circle_stats, scale, alignment, acc)
+    report["global_refinement"] = checks
     outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
     shutil.rmtree(s.work, ignore_errors=True)
     return report
@@ -508,6 +519,76 @@ def _focal_fixed(cfg: SfmConfig, photos: list[Photo]) -> bool:
             ", ".join(sorted({p.focal_source for p in photos})),
         )
     return fix_focal
+
+
+def _map(s: _Session) -> MappingResult:
+    """Map the photos: an adaptive round's new photos registered into the previous map
+    (``cfg.register_new_photos``, :func:`map_new_photos`), else (or when too few register)
+    :func:`map_photos`."""
+    cfg = s.cfg
+    mres = None
+    if s.previous is not None and cfg.incremental and cfg.register_new_photos:
+        mres = map_new_photos(
+            s.db_path, s.root, s.photos, cfg, s.previous, _previous_camera_offset(s)
+        )
+    if mres is None:
+        mres = map_photos(
+            s.db_path, s.root, s.names, s.work / "mapping", cfg, s.previous, s.fix_focal
+        )
+    s.timings["map"] = mres.seconds
+    return mres
+
+
+def _previous_camera_offset(s: _Session) -> tuple[float, float] | None:
+    """The camera centre in the robot frame (forward, left) (m) as the alignment of the
+    previous map finds it (None when it finds none)."""
+    try:
+        fit = robot_frame_transform(s.previous, s.photos, **_align_settings(s.cfg, None))
+    except ValueError as exc:
+        log.warning("no camera offset from the previous map (%s)", exc)
+        return None
+    return fit.camera_offset_m
+
+
+def _refine_globally_if_needed(
+    s: _Session, mres: MappingResult, alignment: Alignment
+) -> tuple[dict, Alignment | None]:
+    """After the fast path (mode ``registered``, model aligned): the global refinement
+    (:func:`refine_globally`, mode ``registered+global``) when
+    :func:`global_refinement_checks` ask for it, and the model aligned again.
+
+    Returns:
+        The checks (report.json ``global_refinement``; empty on other paths) and the new
+        alignment (None when the refinement did not run).
+    """
+    if mres.mode != "registered":
+        return {}, None
+    cfg = s.cfg
+    checks = global_refinement_checks(
+        mres.reconstruction,
+        mres.new_ids,
+        mres.refinement.get("residual_ratio"),
+        s.photos,
+        alignment.camera_offset_m,
+        cfg,
+    )
+    if not checks["run"]:
+        return checks, None
+    log.warning("global refinement of the map: %s", "; ".join(checks["reasons"]))
+    t = time.perf_counter()
+    registration = mres.refinement
+    refine_globally(
+        mres, s.db_path, s.root, s.work / "global", cfg, s.names, s.fix_focal,
+        _kept_previous(s, True),
+    )  # fmt: skip
+    mres.refinement = mres.refinement | {"registration": registration}
+    mres.mode = "registered+global"
+    rec = mres.reconstruction
+    alignment = robot_frame_transform(rec, s.photos, **_align_settings(cfg, s.previous))
+    align_to_robot_frame(rec, alignment)
+    checks["seconds"] = time.perf_counter() - t
+    s.timings["global_refinement"] = checks["seconds"]
+    return checks, alignment
 
 
 def _check_registered(cfg: SfmConfig, mres: MappingResult, n_photos: int) -> None:
@@ -601,8 +682,16 @@ def _drop_inconsistent_photos(
             )
 
 
+def _kept_previous(s: _Session, continued: bool) -> frozenset[str]:
+    """The previous round's photos, whose poses a round update holds
+    (``cfg.update_keep_previous_poses``; none when the model was not continued)."""
+    if not (continued and s.cfg.update_keep_previous_poses and s.previous is not None):
+        return frozenset()
+    return frozenset(s.previous.image(i).name for i in s.previous.reg_image_ids())
+
+
 def _hold_photos_on_circles(
-    s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, mode: str
+    s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, continued: bool
 ) -> tuple[pycolmap.Reconstruction, Alignment | None, dict]:
     """With the lever-arm scale and ``cfg.circle_prior_std_m``: repair and adjust the
     turn-in-place circles (:func:`repair_circles`) and align the result again.
@@ -611,9 +700,7 @@ def _hold_photos_on_circles(
         The model (aligned), the new alignment (None when not run) and the circle stats.
     """
     cfg = s.cfg
-    kept_previous: frozenset[str] = frozenset()
-    if mode == "incremental" and cfg.update_keep_previous_poses and s.previous is not None:
-        kept_previous = frozenset(s.previous.image(i).name for i in s.previous.reg_image_ids())
+    kept_previous = _kept_previous(s, continued)
     if not (
         cfg.camera_offset_m is not None
         and cfg.circle_prior_std_m > 0

@@ -179,6 +179,28 @@ class _Robot:
         self.drive(float(np.linalg.norm(delta)))
 
 
+@dataclass
+class _Localizer:
+    """The robot's visual localization of an adaptive round, faked from the truth: the true
+    robot pose in the map frame (round 0's first robot position as origin, x along compass
+    heading 0) plus Gaussian noise ``noise_m`` (m, per axis) and a constant ``bias_m``."""
+
+    origin: np.ndarray
+    compass_offset_deg: float
+    noise_m: float
+    bias_m: np.ndarray
+    rng: np.random.Generator
+
+    def fix(self, true: np.ndarray) -> dict:
+        a = math.radians(self.compass_offset_deg)
+        c, s = math.cos(a), math.sin(a)
+        d = true[:2] - self.origin
+        xy = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+        xy = xy + self.bias_m + self.rng.normal(0.0, self.noise_m, 2)
+        theta = (true[2] + a) % (2 * math.pi)
+        return {"x": float(xy[0]), "y": float(xy[1]), "theta": float(theta)}
+
+
 def _session_record(room: SyntheticRoom, round_index: int) -> dict:
     """The capture log's first record: robot, scene, round and camera."""
     return {
@@ -204,9 +226,10 @@ def _take_photo(
     t: float,
     compass_noise_deg: float,
     exif_focal: bool,
+    localizer: _Localizer | None = None,
 ) -> dict:
     """Render and write photo ``idx`` at the robot's true pose; its log record (noisy
-    compass, odometry, truth)."""
+    compass, odometry, truth; with ``localizer`` a visual fix of the photo)."""
     true, odo = robot.true, robot.odo
     R, c = room.cam_from_world(*true)
     name = f"images/r{round_index:03d}_{idx:04d}.jpg"
@@ -214,6 +237,9 @@ def _take_photo(
     compass = (
         math.degrees(true[2]) + room.compass_offset_deg + robot.rng.normal(0, compass_noise_deg)
     ) % 360.0
+    fix = {}
+    if localizer is not None:
+        fix = {"localization": localizer.fix(true), "localization_source": "this photo"}
     return {
         "type": "photo",
         "t": t,
@@ -224,6 +250,7 @@ def _take_photo(
         "ultrasonic_cm": 255,
         "bump_front": False,
         "bump_rear": False,
+        **fix,
         "truth": {
             "robot": {"x": true[0], "y": true[1], "theta": true[2]},
             "center": c.tolist(),
@@ -245,6 +272,9 @@ def make_capture(
     compass_noise_deg: float = 1.0,
     seed: int = 1,
     exif_focal: bool = True,
+    map_origin: tuple[float, float] | None = None,
+    localization_noise_m: float = 0.005,
+    localization_bias_m: tuple[float, float] = (0.0, 0.0),
 ) -> list[dict]:
     """Write a synthetic round capture: ``out_dir/images/*.jpg`` and ``out_dir/log.jsonl``.
 
@@ -262,6 +292,11 @@ def make_capture(
         start_spot: index of the first spot on the spot ring (later rounds visit other spots).
         seed: random seed for the noise.
         exif_focal: write EXIF focal tags.
+        map_origin: an adaptive round's map frame: the world position (m) of round 0's
+            first robot position (its ``truth.robot``); every photo record then holds the
+            robot's visual fix of it (``localization``, ``localization_source``: the true
+            pose in the map frame, with Gaussian noise ``localization_noise_m`` (m) per axis
+            and a constant offset ``localization_bias_m`` (m, map frame)).
 
     Returns:
         The photo records written (with ``truth``).
@@ -276,6 +311,15 @@ def make_capture(
     compass0 = (math.degrees(true[2]) + room.compass_offset_deg) % 360.0
     odo = np.array([0.0, 0.0, math.radians(compass0)])
     robot = _Robot(true, odo, rng, turn_slip, odometry_noise)
+    localizer = None
+    if map_origin is not None:
+        localizer = _Localizer(
+            np.asarray(map_origin, float),
+            room.compass_offset_deg,
+            localization_noise_m,
+            np.asarray(localization_bias_m, float),
+            np.random.default_rng(seed + 1000),
+        )
     records: list[dict] = []
     t = 0.0
     idx = 0
@@ -287,8 +331,9 @@ def make_capture(
         for k in range(len(spots)):
             for _ in range(photos_per_circle):
                 rec = _take_photo(
-                    out_dir, room, robot, round_index, idx, t, compass_noise_deg, exif_focal
-                )
+                    out_dir, room, robot, round_index, idx, t, compass_noise_deg, exif_focal,
+                    localizer,
+                )  # fmt: skip
                 log.write(rec)
                 records.append(rec)
                 idx += 1

@@ -1,0 +1,470 @@
+"""An adaptive round's fast path: register its new photos into the previous round's map.
+
+Round r-1's model is already in the robot frame and its photos' poses are what the robot
+and the later stages used. The new photos are registered one by one into it with COLMAP's
+incremental mapper (absolute pose by RANSAC from each photo's matches to the map's points,
+triangulation of its new tracks, local bundle adjustment of it and its most connected
+neighbours); the previous photos' poses and the camera intrinsics stay fixed throughout.
+
+The robot's own estimate of where it took a photo (its visual localization fix, or the last
+fix carried by odometry) is the second initial guess: the pose is also refined from there
+on all the photo's matches to map points, and whichever of the two poses explains more of
+them within ``sfm.refine_max_error_px`` is kept. Far walls seen at one depth let RANSAC's
+12 px inlier threshold settle on a pose turned by a few degrees and shifted by decimetres
+(office round 6: two photos 29 and 42 cm off, 1.0-1.9 px median error; refined from the
+robot's estimate 1.3 cm off, 0.3-0.5 px).
+
+Then the new photos get the robust refinement the whole map gets on the slow path (drop
+observations beyond ``sfm.refine_max_error_px``, bundle adjustment with a Cauchy loss), but
+only over the new photos and the points they see. No global bundle adjustment runs here:
+:func:`global_refinement_checks` says when the map needs one.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from scenebot.sfm.config import SfmConfig
+from scenebot.sfm.features import open_database
+from scenebot.sfm.mapping import (
+    MappingResult,
+    ObservationTable,
+    dropped_photos,
+    filter_observations,
+    mapping_options,
+)
+from scenebot.sfm.photos import Photo
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Registration:
+    """The previous map with the new photos registered into it.
+
+    Attributes:
+        reconstruction: the model (the previous model's frame).
+        new_ids: image ids of the photos registered now.
+        previous_ids: image ids of the previous model's photos (poses held).
+        stats: counts and seconds per step (report.json ``refinement``).
+    """
+
+    reconstruction: pycolmap.Reconstruction
+    new_ids: list[int]
+    previous_ids: set[int]
+    stats: dict = field(default_factory=dict)
+
+
+def map_new_photos(
+    db_path: Path,
+    image_root: Path,
+    photos: list[Photo],
+    cfg: SfmConfig,
+    previous: pycolmap.Reconstruction,
+    camera_offset_m: tuple[float, float] | None,
+) -> MappingResult | None:
+    """The fast path: the new photos registered into ``previous`` (:func:`register_new_photos`,
+    the robot's estimates as second initial guesses, :func:`camera_priors`) and refined
+    (:func:`refine_new_photos`); mode ``registered``.
+
+    Args:
+        camera_offset_m: the camera centre in the robot frame (forward, left) (m), as the
+            previous map's alignment found it; None: at the robot's position.
+
+    Returns:
+        The mapping result, or None (logged) when fewer than ``cfg.min_registered_share``
+        of the new photos registered: the caller maps the slow way.
+    """
+    t0 = time.perf_counter()
+    names = [p.name for p in photos]
+    heights = [previous.image(i).projection_center()[2] for i in previous.reg_image_ids()]
+    priors = camera_priors(
+        photos, camera_offset_m, cfg.camera_yaw_deg, float(np.median(heights or [0.0]))
+    )
+    reg = register_new_photos(db_path, image_root, names, cfg, previous, priors)
+    n_new = len(names) - len(reg.previous_ids)
+    if len(reg.new_ids) < cfg.min_registered_share * n_new:
+        log.warning(
+            "%d of %d new photos registered into the previous map (< sfm.min_registered_share "
+            "= %g): continuing with the incremental mapper",
+            len(reg.new_ids),
+            n_new,
+            cfg.min_registered_share,
+        )
+        return None
+    refinement = refine_new_photos(reg, cfg) | reg.stats
+    refinement["fixed_previous_photos"] = len(reg.previous_ids)
+    rec = reg.reconstruction
+    log.info(
+        "registered %d of %d new photos into the previous map in %.1f s",
+        len(reg.new_ids),
+        n_new,
+        time.perf_counter() - t0,
+    )
+    return MappingResult(
+        rec,
+        "registered",
+        1,
+        dropped_photos(db_path, names, [rec], cfg),
+        time.perf_counter() - t0,
+        refinement,
+        new_ids=reg.new_ids,
+    )
+
+
+def camera_xy(
+    pose: tuple[float, float, float], camera_offset_m: tuple[float, float] | None
+) -> np.ndarray:
+    """The camera centre (x, y) (m) of the robot at ``pose`` (x, y, theta) whose camera sits
+    ``camera_offset_m`` (forward, left) (m; None: on the rotation axis) from its axis."""
+    fwd, left = (0.0, 0.0) if camera_offset_m is None else map(float, camera_offset_m)
+    x, y, th = pose
+    c, s = math.cos(th), math.sin(th)
+    return np.array([x + fwd * c - left * s, y + fwd * s + left * c])
+
+
+def camera_priors(
+    photos: list[Photo],
+    camera_offset_m: tuple[float, float] | None,
+    camera_yaw_deg: float,
+    height_m: float,
+) -> dict[str, pycolmap.Rigid3d]:
+    """Photo name -> camera pose (cam_from_world, robot frame) where the robot's own
+    estimate (``localization``) puts it: a level camera at the robot's heading plus
+    ``camera_yaw_deg``, its centre ``camera_offset_m`` (forward, left) from the robot's
+    position at height ``height_m``. Photos without an estimate are left out."""
+    out: dict[str, pycolmap.Rigid3d] = {}
+    for p in photos:
+        if p.localization is None:
+            continue
+        centre = np.r_[camera_xy(p.localization, camera_offset_m), height_m]
+        h = p.localization[2] + math.radians(camera_yaw_deg)
+        view = np.array([math.cos(h), math.sin(h), 0.0])
+        right = np.array([math.sin(h), -math.cos(h), 0.0])
+        rot = np.stack([right, [0.0, 0.0, -1.0], view])  # rows: camera x, y (down), z
+        out[p.name] = pycolmap.Rigid3d(pycolmap.Rotation3d(rot), -rot @ centre)
+    return out
+
+
+def register_new_photos(
+    db_path: Path,
+    image_root: Path,
+    names: list[str],
+    cfg: SfmConfig,
+    previous: pycolmap.Reconstruction,
+    priors: dict[str, pycolmap.Rigid3d],
+) -> Registration:
+    """Register the photos of ``names`` missing from ``previous`` into a copy of it.
+
+    Args:
+        db_path: the scene database (features and matches of all ``names``).
+        image_root: folder the names are relative to (for point colours).
+        names: the photo set; photos of ``previous`` outside it are taken out.
+        cfg: sfm settings (pose and triangulation thresholds of the incremental mapper).
+        previous: round r-1's model, image ids as in the database.
+        priors: photo name -> the robot's estimate of its camera pose (:func:`camera_priors`).
+
+    Returns:
+        The registration (photos that did not register are simply not in the model).
+    """
+    t0 = time.perf_counter()
+    rec = pycolmap.Reconstruction(previous)
+    keep = set(names)
+    for iid in list(rec.reg_image_ids()):
+        if rec.image(iid).name not in keep:
+            rec.deregister_frame(rec.image(iid).frame_id)
+    previous_ids = set(rec.reg_image_ids())
+    with open_database(db_path) as db:
+        cache_opts = pycolmap.DatabaseCacheOptions()
+        cache_opts.min_num_matches = cfg.min_num_matches
+        cache_opts.image_names = keep
+        cache = pycolmap.DatabaseCache.create(db, cache_opts)
+    opts = mapping_options(cfg, names, continuing=True, fix_focal=True)
+    mopts = opts.get_mapper()
+    mopts.fix_existing_frames = True
+    mopts.constant_cameras = set(rec.cameras.keys())
+    mopts.abs_pose_refine_extra_params = False
+    mapper = pycolmap.IncrementalMapper(cache)
+    mapper.begin_reconstruction(rec)
+    guess = _PriorGuess(mapper, cache.correspondence_graph, priors, cfg.refine_max_error_px)
+    new_ids = _register_loop(mapper, opts, mopts, guess)
+    mapper.end_reconstruction(False)
+    for iid in new_ids:
+        rec.extract_colors_for_image(iid, str(image_root))
+    stats = {
+        "registered_now": len(new_ids),
+        "poses_from_robot_estimate": guess.taken,
+        "register_seconds": time.perf_counter() - t0,
+    }
+    return Registration(rec, new_ids, previous_ids, stats)
+
+
+class _PriorGuess:
+    """The robot's estimate of a just registered photo's pose as a second initial guess.
+
+    Attributes:
+        taken: how many photos kept the pose refined from the robot's estimate.
+    """
+
+    def __init__(
+        self,
+        mapper: pycolmap.IncrementalMapper,
+        graph: pycolmap.CorrespondenceGraph,
+        priors: dict[str, pycolmap.Rigid3d],
+        max_error_px: float,
+    ) -> None:
+        self.mapper, self.graph, self.priors = mapper, graph, priors
+        self.max_error_px = max_error_px
+        self.taken = 0
+
+    def try_pose(self, iid: int, drop_error_px: float) -> bool:
+        """Refine the pose of image ``iid`` from its prior on all its matches to map
+        points (Cauchy loss); keep it when it explains more of them within
+        ``max_error_px`` than the registered pose, dropping the observations it puts
+        beyond ``drop_error_px``. Returns whether the pose was replaced."""
+        rec = self.mapper.reconstruction
+        im = rec.image(iid)
+        prior = self.priors.get(im.name)
+        if prior is None:
+            return False
+        idx, xy, xyz = map_correspondences(rec, self.graph, iid)
+        if len(idx) < 6:
+            return False
+        refined = pycolmap.refine_absolute_pose(
+            prior, xy, xyz, np.ones(len(idx), bool), im.camera,
+            pycolmap.AbsolutePoseRefinementOptions(),
+        )  # fmt: skip
+        if refined is None:
+            return False
+        pose = refined["cam_from_world"]
+        errors = [_errors(im.camera, p, xy, xyz) for p in (im.cam_from_world(), pose)]
+        if np.sum(errors[1] <= self.max_error_px) <= np.sum(errors[0] <= self.max_error_px):
+            return False
+        rec.frame(im.frame_id).rig_from_world = pose
+        table = ObservationTable(rec, [iid])
+        for k in table.point2D_idx[~(table.errors(rec) <= drop_error_px)]:
+            self.mapper.observation_manager.delete_observation(iid, int(k))
+        self.taken += 1
+        return True
+
+
+def map_correspondences(
+    rec: pycolmap.Reconstruction, graph: pycolmap.CorrespondenceGraph, iid: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The matches of image ``iid``'s points to 3D points of ``rec`` (through the
+    correspondences with registered images' observations): point2D indices (M,), their
+    pixel positions (M, 2) and the 3D points (M, 3); one per 2D point (its first)."""
+    im = rec.image(iid)
+    idx, xy, xyz = [], [], []
+    for k in range(im.num_points2D()):
+        for c in graph.extract_correspondences(iid, k):
+            other = rec.image(c.image_id) if rec.exists_image(c.image_id) else None
+            if other is None or not other.has_pose:
+                continue
+            p2 = other.point2D(c.point2D_idx)
+            if p2.has_point3D():
+                idx.append(k)
+                xy.append(im.point2D(k).xy)
+                xyz.append(rec.point3D(p2.point3D_id).xyz)
+                break
+    return np.array(idx, np.int64), np.array(xy).reshape(-1, 2), np.array(xyz).reshape(-1, 3)
+
+
+def _errors(
+    camera: pycolmap.Camera, pose: pycolmap.Rigid3d, xy: np.ndarray, xyz: np.ndarray
+) -> np.ndarray:
+    """Reprojection errors (px) of ``xyz`` against ``xy`` at ``pose`` (inf behind it)."""
+    cam_pts = pose * xyz
+    err = np.linalg.norm(camera.img_from_cam(cam_pts, check_cheirality=False) - xy, axis=1)
+    err[cam_pts[:, 2] <= 0] = np.inf
+    return err
+
+
+def _register_loop(
+    mapper: pycolmap.IncrementalMapper,
+    opts: pycolmap.IncrementalPipelineOptions,
+    mopts: pycolmap.IncrementalMapperOptions,
+    guess: _PriorGuess,
+) -> list[int]:
+    """Register the next best image while one registers (COLMAP's order: most visible map
+    points first; structure-less resectioning when none registers from map points), try
+    the robot's estimate as a second initial pose (:class:`_PriorGuess`), triangulate it
+    and adjust it locally. Returns the ids registered, in order."""
+    tri = opts.get_triangulation()
+    local_ba = opts.get_local_bundle_adjustment()
+    local_ba.refine_focal_length = False
+    local_ba.refine_extra_params = False
+    local_ba.refine_principal_point = False
+    new_ids: list[int] = []
+    while True:
+        iid = _register_next(mapper, mopts, opts.structure_less_registration_fallback)
+        if iid is None:
+            return new_ids
+        new_ids.append(iid)
+        guess.try_pose(iid, mopts.filter_max_reproj_error)
+        mapper.triangulate_image(tri, iid)
+        mapper.iterative_local_refinement(
+            opts.ba_local_max_refinements,
+            opts.ba_local_max_refinement_change,
+            mopts,
+            local_ba,
+            tri,
+            iid,
+        )
+
+
+def _register_next(
+    mapper: pycolmap.IncrementalMapper,
+    mopts: pycolmap.IncrementalMapperOptions,
+    structure_less: bool,
+) -> int | None:
+    """Register the first candidate that registers; its id, or None when none does."""
+    for iid in mapper.find_next_images(mopts, False):
+        if mapper.register_next_image(mopts, iid):
+            return iid
+    if structure_less:
+        for iid in mapper.find_next_images(mopts, True):
+            if mapper.register_next_structure_less_image(mopts, iid):
+                return iid
+    return None
+
+
+def refine_new_photos(reg: Registration, cfg: SfmConfig) -> dict:
+    """The robust refinement of the new photos: ``cfg.refine_iterations`` times, drop the
+    observations of their points beyond ``cfg.refine_max_error_px``, then bundle-adjust
+    their poses and points with a Cauchy loss (1 px); the previous photos observe those
+    points with their poses held, the intrinsics stay fixed. Filters once more at the end.
+
+    Returns:
+        Stats: observations removed, reprojection error (px) of the whole model before and
+        after, seconds.
+    """
+    t0 = time.perf_counter()
+    rec = reg.reconstruction
+    ids = [i for i in reg.new_ids if rec.exists_image(i) and rec.image(i).has_pose]
+    before = rec.compute_mean_reprojection_error()
+    removed = 0
+    opts = pycolmap.BundleAdjustmentOptions()
+    opts.print_summary = False
+    opts.refine_focal_length = False
+    opts.refine_principal_point = False
+    opts.refine_extra_params = False
+    opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+    opts.ceres.loss_function_scale = 1.0
+    opts.ceres.solver_options.num_threads = cfg.num_threads
+    opts.ceres.solver_options.function_tolerance = cfg.register_ba_function_tolerance
+    points = _points_of(rec, ids)
+    table = ObservationTable(rec, _images_of(rec, points), points)
+    for _ in range(cfg.refine_iterations if ids else 0):
+        removed += filter_observations(rec, cfg.refine_max_error_px, table, points)
+        config = pycolmap.BundleAdjustmentConfig()
+        for iid in ids:
+            config.add_image(iid)
+        for pid in points:  # with every observation: the previous photos hold them
+            if rec.exists_point3D(pid):
+                config.add_variable_point(pid)
+        pycolmap.create_default_bundle_adjuster(opts, config, rec).solve()
+    if ids:
+        removed += filter_observations(rec, cfg.refine_max_error_px, table, points)
+    return {
+        "observations_removed": removed,
+        "reprojection_error_before_px": before,
+        "reprojection_error_after_px": rec.compute_mean_reprojection_error(),
+        "residual_ratio": residual_ratio(rec, table, ids),
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def _points_of(rec: pycolmap.Reconstruction, ids: list[int]) -> set[int]:
+    """The 3D points observed by images ``ids``."""
+    out: set[int] = set()
+    for iid in ids:
+        out.update(p.point3D_id for p in rec.image(iid).get_observation_points2D())
+    return out
+
+
+def _images_of(rec: pycolmap.Reconstruction, point_ids: set[int]) -> set[int]:
+    """The images observing the 3D points ``point_ids``."""
+    return {el.image_id for pid in point_ids for el in rec.point3D(pid).track.elements}
+
+
+def residual_ratio(
+    rec: pycolmap.Reconstruction, table: ObservationTable, new_ids: list[int]
+) -> float | None:
+    """Median reprojection error of the new photos' observations in ``table`` over that of
+    the other photos' observations of the same points (None without observations on
+    either side, or none of the latter above zero)."""
+    err = table.errors(rec)
+    is_new = np.isin(table.image_ids, np.asarray(new_ids, np.int64))
+    e_new, e_old = err[is_new], err[~is_new]
+    if not len(e_new) or not len(e_old) or not np.median(e_old) > 0:
+        return None
+    return float(np.median(e_new) / np.median(e_old))
+
+
+def fix_offsets(
+    rec: pycolmap.Reconstruction,
+    photos: list[Photo],
+    new_names: set[str],
+    camera_offset_m: tuple[float, float] | None,
+) -> dict[str, float]:
+    """Name -> horizontal distance (m) between where a new photo registered (``rec`` in the
+    robot frame) and where the robot's own visual localization fix of that photo put the
+    camera (its pose plus the camera offset (forward, left) in the robot frame)."""
+    by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
+    out: dict[str, float] = {}
+    for p in photos:
+        if p.name not in new_names or p.name not in by_name or not p.localization_fix:
+            continue
+        centre = rec.image(by_name[p.name]).projection_center()[:2]
+        out[p.name] = float(np.linalg.norm(centre - camera_xy(p.localization, camera_offset_m)))
+    return out
+
+
+def global_refinement_checks(
+    rec: pycolmap.Reconstruction,
+    new_ids: list[int],
+    ratio: float | None,
+    photos: list[Photo],
+    camera_offset_m: tuple[float, float] | None,
+    cfg: SfmConfig,
+) -> dict:
+    """Whether the map needs the global refinement after the fast path (``rec`` in the
+    robot frame): the new photos' median reprojection error beyond
+    ``cfg.max_residual_ratio`` times the previous photos' on the same points (``ratio``,
+    :func:`residual_ratio`), or their median distance from their own visual localization
+    fixes (3 fixes at least) beyond ``cfg.max_fix_offset_m``.
+
+    Returns:
+        report.json's ``global_refinement``: ``run`` (bool), ``reasons`` and the figures.
+    """
+    new_names = {rec.image(i).name for i in new_ids if rec.exists_image(i)}
+    offsets = fix_offsets(rec, photos, new_names, camera_offset_m)
+    median_offset = float(np.median(list(offsets.values()))) if len(offsets) >= 3 else None
+    reasons = []
+    if ratio is not None and ratio > cfg.max_residual_ratio:
+        reasons.append(
+            f"the new photos' median reprojection error is {ratio:.2f} x the previous "
+            f"photos' on the same points (> sfm.max_residual_ratio = "
+            f"{cfg.max_residual_ratio})"
+        )
+    if 0 < cfg.max_fix_offset_m < (median_offset or 0.0):
+        reasons.append(
+            f"the new photos registered {100 * median_offset:.1f} cm from their "
+            f"localization fixes in the median (> sfm.max_fix_offset_m = "
+            f"{cfg.max_fix_offset_m} m)"
+        )
+    return {
+        "run": bool(reasons),
+        "reasons": reasons,
+        "residual_ratio": ratio,
+        "fix_offset_median_m": median_offset,
+        "photos_with_fix": len(offsets),
+    }
