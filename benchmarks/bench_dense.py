@@ -11,6 +11,10 @@ Compares, on the same reference view and sources (true cameras, known depth):
 * ``colmap cuda``: pycolmap.patch_match_stereo on the same views and sources, per view, only
   where pycolmap has CUDA (``--colmap``).
 
+``--processes 1 2`` runs the whole stage on the CPU on a synthetic capture once per
+``dense.num_threads`` (worker processes), interleaved, and prints seconds per view, CPU/wall,
+the load average and whether the depth maps are the same.
+
 ``--export DIR`` writes the views as a COLMAP dense workspace (``DIR/dense``) and as
 ``DIR/views.npz``; ``--views DIR/views.npz`` runs the taichi rows on those views without
 rendering (numpy, OpenCV, taichi and pydantic only: no open3d), and ``--colmap DIR`` runs COLMAP
@@ -266,6 +270,95 @@ def stage_quality(width: int, height: int, out: str, backend: str, per_row: int)
     (root / "quality.json").write_text(json.dumps({"depth": [cov, acc], "cloud": metrics}))
 
 
+#: the dense stage on a synthetic capture in a fresh process (argv: capture folder, output
+#: folder, image size, num_threads); prints its summary's timings as JSON
+_STAGE_SNIPPET = """
+import json, sys
+from pathlib import Path
+from scenebot.dense import stage
+from scenebot.dense.config import DenseConfig
+cap, out, size, n = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+cfg = DenseConfig(max_image_size=size, num_threads=n, taichi_arch="cpu", plots=False)
+s = stage.run(cfg, stage.DenseInputs(cap / "sparse", cap / "images"), stage.DenseOutputs(out))
+print(json.dumps({k: s[k] for k in ("processes", "depth_seconds", "fusion_seconds",
+                                     "total_seconds")} | {"fill": s["plane_fill"]["seconds"]}))
+"""
+
+
+def stage_processes(
+    root: Path, width: int, height: int, per_row: int, threads: tuple[int, ...], repeats: int
+) -> dict[int, dict]:
+    """The whole dense stage (taichi on the CPU) on one synthetic capture, once per entry of
+    ``threads`` (``dense.num_threads``: worker processes), each in a fresh process, the
+    settings interleaved over ``repeats`` rounds.
+
+    Returns:
+        Per num_threads: median ``wall_s``, ``cpu_s`` (the process and its workers),
+        ``cpu_wall``, ``load`` (1-minute load average before its first run), the stage's
+        last ``summary`` timings and ``metrics`` (mean coverage and within-2% accuracy of the
+        final depth maps), and ``maps`` (the final depth maps, to compare the settings).
+    """
+    import resource
+    import shutil
+    import subprocess
+    import sys
+
+    from scenebot.dense import evaluate
+    from scenebot.dense import workspace as ws
+    from scenebot.testing.dense import box_room_scene, make_dataset, stereo_rig
+
+    shutil.rmtree(root, ignore_errors=True)
+    centers, headings = stereo_rig(num_per_row=per_row)
+    _, views = make_dataset(root / "capture", box_room_scene(), centers, headings, width, height)
+    runs: dict[int, dict] = {n: {"wall": [], "cpu": [], "load": None} for n in threads}
+    for _ in range(repeats):
+        for n in threads:
+            out = root / f"dense_{n}"
+            shutil.rmtree(out, ignore_errors=True)
+            runs[n]["load"] = runs[n]["load"] or os.getloadavg()[0]
+            r0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+            proc = subprocess.run(
+                [sys.executable, "-c", _STAGE_SNIPPET, str(root / "capture"), str(out),
+                 str(max(width, height)), str(n)],
+                check=True, capture_output=True, text=True,
+            )  # fmt: skip
+            wall, r1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
+            runs[n]["wall"].append(wall)
+            runs[n]["cpu"].append(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime)
+            runs[n]["summary"] = json.loads(proc.stdout.strip().splitlines()[-1])
+    result = {}
+    for n, r in runs.items():
+        maps = [ws.read_maps(root / f"dense_{n}", v.name, "geometric")[0] for v in views]
+        ms = [evaluate.depth_map_metrics(d, v.depth) for d, v in zip(maps, views, strict=True)]
+        wall, cpu = statistics.median(r["wall"]), statistics.median(r["cpu"])
+        result[n] = {"wall_s": wall, "cpu_s": cpu, "cpu_wall": cpu / wall, "load": r["load"],
+                     "summary": r["summary"], "maps": maps,
+                     "metrics": {k: float(np.mean([m[k] for m in ms]))
+                                 for k in ("coverage", "accuracy")}}  # fmt: skip
+    return result
+
+
+def print_stage_processes(result: dict[int, dict], num_views: int) -> None:
+    """A table of :func:`stage_processes`: seconds per view, CPU/wall, quality."""
+    first = result[min(result)]["maps"]
+    print(f"{'num_threads':>11s} {'wall s':>8s} {'s/view':>7s} {'cpu s':>8s} {'cpu/wall':>8s} "
+          f"{'load':>5s} {'coverage':>8s} {'within 2%':>9s} {'same maps':>9s}")  # fmt: skip
+    for n, r in result.items():
+        same = all(np.array_equal(a, b) for a, b in zip(first, r["maps"], strict=True))
+        print(f"{n:11d} {r['wall_s']:8.1f} {r['wall_s'] / num_views:7.2f} {r['cpu_s']:8.1f} "
+              f"{r['cpu_wall']:8.2f} {r['load']:5.1f} {r['metrics']['coverage']:8.3f} "
+              f"{r['metrics']['accuracy']:9.3f} {same!s:>9s}")  # fmt: skip
+
+
+def processes_main(args: argparse.Namespace) -> None:
+    """``--processes``: the whole stage once per num_threads given, the table printed."""
+    res = stage_processes(Path(args.out), args.width, args.height, args.per_row,
+                          tuple(args.processes), args.repeats)  # fmt: skip
+    print(f"# dense stage, {2 * args.per_row} synthetic views {args.width}x{args.height}, "
+          f"taichi on the CPU, median of {args.repeats}")  # fmt: skip
+    print_stage_processes(res, 2 * args.per_row)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--width", type=int, default=640)
@@ -289,7 +382,12 @@ def main() -> None:
     ap.add_argument("--backend", default="auto", choices=["auto", "taichi", "colmap_cuda"])
     ap.add_argument("--per-row", type=int, default=7, help="--stage: cameras per row (2 rows)")
     ap.add_argument("--out", default="benchmarks/out/dense_stage", help="--stage: output folder")
+    ap.add_argument("--processes", type=int, nargs="*",
+                    help="the whole stage (CPU) once per dense.num_threads given (e.g. 1 2), "
+                    "interleaved over --repeats, in --out")  # fmt: skip
     args = ap.parse_args()
+    if args.processes:
+        return processes_main(args)
     if args.no_taichi:  # COLMAP alone: no taichi needed (a machine with the CUDA pycolmap)
         if not args.colmap:
             ap.error("--no-taichi needs --colmap")

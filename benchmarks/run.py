@@ -540,7 +540,27 @@ def bench_dense(quick: bool, arch: str = "cpu") -> list[Row]:
             f"+ filter (taichi {got})", t_pm, "s", reps, "plane sweep, 96 planes (numpy/OpenCV)",
             t_ps, f"within 2%: {m_pm['accuracy']:.3f} of {m_pm['coverage']:.3f} covered vs "
             f"{m_ps['accuracy']:.3f} of {m_ps['coverage']:.3f}"),
+        bench_dense_processes(bd, quick),
     ]  # fmt: skip
+
+
+def bench_dense_processes(bd, quick: bool) -> Row:
+    """The whole dense stage on the CPU, per view: its views in 2 worker processes vs all in
+    one process (``dense.num_threads`` 2 vs 1), interleaved, each in a fresh process."""
+    import numpy as np
+
+    w, h, per_row = (320, 240, 4) if quick else (640, 480, 6)
+    n, reps = 2 * per_row, 1 if quick else 2
+    res = bd.stage_processes(HERE / "out" / "dense_processes", w, h, per_row, (1, 2), reps)
+    one, two = res[1], res[2]
+    same = all(np.array_equal(a, b) for a, b in zip(one["maps"], two["maps"], strict=True))
+    return Row("dense", f"dense stage, {n} synthetic views {w}x{h}, taichi on the CPU: views "
+               "in 2 worker processes (num_threads 2), s per view", two["wall_s"] / n, "s", reps,
+               "the same in one process (num_threads 1)", one["wall_s"] / n,
+               f"same depth maps: {same}; within 2%: {two['metrics']['accuracy']:.3f} of "
+               f"{two['metrics']['coverage']:.3f} covered; includes the workers' start",
+               load=two["load"], cpu_wall=two["cpu_wall"], reference_load=one["load"],
+               reference_cpu_wall=one["cpu_wall"])  # fmt: skip
 
 
 # -------------------------------------------------------------------------------- render

@@ -320,7 +320,13 @@ class DenseConfig(Settings):
     taichi_arch: Literal["auto", "cpu", "gpu"] = Field(
         "auto", description="Taichi arch: auto tries CUDA, then Vulkan, then CPU."
     )
-    num_threads: int = Field(-1, description="CPU threads for taichi and fusion (-1 = all).")
+    num_threads: int = Field(
+        -1,
+        description="CPU cores the stage uses (-1 = all): where taichi runs on the CPU, this "
+        "many worker processes estimate, filter and plane-fill whole views, taichi on one "
+        "thread each (the maps do not depend on the count; 1: all in the stage's process); "
+        "on a GPU the stage is one process. Also fusion's threads.",
+    )
     patchmatch: PatchMatchConfig = Field(default_factory=PatchMatchConfig)
     fusion_min_num_pixels: int = Field(
         2,

@@ -684,10 +684,41 @@ def _pyramid(gray: np.ndarray, levels: int) -> list[np.ndarray]:
     return out
 
 
+def _on_cpu() -> bool:
+    """Whether taichi runs on the CPU: its kernels then take numpy arrays in place (no copy);
+    on a GPU the arrays live on the device (``ti.ndarray``) across the kernel calls."""
+    return taichi_arch() in ("x64", "arm64")
+
+
 def _ndarray(a: np.ndarray, dtype=ti.f32):
+    """``a`` as a kernel argument: a contiguous numpy array on the CPU, a device array on a
+    GPU."""
+    a = np.ascontiguousarray(a, dtype=np.float32 if dtype == ti.f32 else np.int32)
+    if _on_cpu():
+        return a
     arr = ti.ndarray(dtype=dtype, shape=a.shape)
-    arr.from_numpy(np.ascontiguousarray(a, dtype=np.float32 if dtype == ti.f32 else np.int32))
+    arr.from_numpy(a)
     return arr
+
+
+def _empty(shape: tuple, dtype=ti.f32):
+    """An uninitialised kernel argument of ``shape`` (see :func:`_ndarray`)."""
+    if _on_cpu():
+        return np.empty(shape, np.float32 if dtype == ti.f32 else np.int32)
+    return ti.ndarray(dtype, shape)
+
+
+def _to_numpy(a) -> np.ndarray:
+    """A kernel argument's values as a numpy array (the array itself on the CPU)."""
+    return a if isinstance(a, np.ndarray) else a.to_numpy()
+
+
+def _fill_from(a, values: np.ndarray) -> None:
+    """Copy ``values`` into the kernel argument ``a`` (of the same shape)."""
+    if isinstance(a, np.ndarray):
+        a[...] = values
+    else:
+        a.from_numpy(np.ascontiguousarray(values, dtype=np.float32))
 
 
 class PatchMatchSolver:
@@ -767,8 +798,8 @@ class PatchMatchSolver:
                     )
                 sd[s, : dm.shape[0], : dm.shape[1]] = dm
         A, b, Q, q = self._relative(ref, srcs, Kr, Ks)
-        wn = ti.ndarray(ti.f32, (h, w, self.nw * self.nw))
-        rn = ti.ndarray(ti.f32, (h, w, self.nw * self.nw))
+        wn = _empty((h, w, self.nw * self.nw))
+        rn = _empty((h, w, self.nw * self.nw))
         sig_s = cfg.sigma_spatial if cfg.sigma_spatial > 0 else float(cfg.window_radius)
         _precompute_ref(
             _ndarray(ref_gray), wn, rn, sig_s, cfg.sigma_color, cfg.window_radius, cfg.window_step
@@ -876,15 +907,15 @@ class PatchMatchSolver:
                 g, [p[lev] for p in src_pyr], Kr, Ks, ref, srcs, src_depths if geometric else None
             )
             maps = (
-                ti.ndarray(ti.f32, (h, w)),
-                ti.ndarray(ti.f32, (h, w, 3)),
-                ti.ndarray(ti.f32, (h, w)),
-                ti.ndarray(ti.f32, (h, w)),
-                ti.ndarray(ti.i32, (h, w)),
+                _empty((h, w)),
+                _empty((h, w, 3)),
+                _empty((h, w)),
+                _empty((h, w)),
+                _empty((h, w), ti.i32),
             )
             if geometric:
-                maps[0].from_numpy(init[0].astype(np.float32))
-                maps[1].from_numpy(init[1].astype(np.float32))
+                _fill_from(maps[0], init[0])
+                _fill_from(maps[1], init[1])
                 iters, nb = cfg.geom_iterations, cfg.neighbors[0]
             else:
                 iters, nb = cfg.iterations[lev], cfg.neighbors[min(lev, len(cfg.neighbors) - 1)]
@@ -893,14 +924,14 @@ class PatchMatchSolver:
                 else:
                     up_d = cv2.resize(depth_np, (w, h), interpolation=cv2.INTER_NEAREST)
                     up_n = cv2.resize(normal_np, (w, h), interpolation=cv2.INTER_NEAREST)
-                    maps[0].from_numpy(up_d)
-                    maps[1].from_numpy(up_n)
+                    _fill_from(maps[0], up_d)
+                    _fill_from(maps[1], up_n)
             # perturbation size: large on the coarsest level, small once upsampled
             scale0 = 0.25 * 0.4 ** (levels - 1 - lev) if not geometric else 0.01
             rnd = (not geometric) and lev > 0
             use_sel = geometric or (lev == 0 and cfg.fine_view_selection)
             self._iterate(L, maps, iters, geometric, (dmin, dmax), scale0, rnd, nb, use_sel)
-            depth_np, normal_np, cost_np, photo_np = (m.to_numpy() for m in maps[:4])
+            depth_np, normal_np, cost_np, photo_np = (_to_numpy(m) for m in maps[:4])
         return DepthResult(depth_np, normal_np, cost_np, photo_np)
 
     def consistent_count(
@@ -914,13 +945,13 @@ class PatchMatchSolver:
                 raise ValueError(f"depth map of {v.name} has shape {dm.shape}, not {v.gray.shape}")
         sd, hw = self._stack(list(src_depths))
         A, b, Q, q = self._relative(ref, srcs, ref.K, [v.K for v in srcs])
-        count = ti.ndarray(ti.f32, depth.shape)
+        count = _empty(depth.shape)
         _consistency(
             _ndarray(depth), count, _ndarray(np.linalg.inv(ref.K)), _ndarray(hw, ti.i32),
             _ndarray(A), _ndarray(b), _ndarray(Q), _ndarray(q), _ndarray(sd), len(srcs),
             cfg.filter_max_reproj_error, cfg.filter_max_rel_depth_error,
         )  # fmt: skip
-        return count.to_numpy()
+        return _to_numpy(count)
 
     def filter(
         self,

@@ -10,6 +10,10 @@ Entry point :func:`run`. Writes under ``outputs.dense_dir`` (``results/{scene}/f
 * ``dense_summary.json`` (backend, per-view sources, depth ranges, coverage, timings),
 * with ``plots``: ``fused_views.png``, ``depth_normal_mosaic.png`` and, with the plane
   fill, ``planes.png`` (its planes from above; the planes themselves in ``plane_fill.npz``).
+
+Where taichi runs on the CPU, each step's views (photometric pass, geometric pass, filter,
+plane fill: :mod:`scenebot.dense.passes`) are spread over ``dense.num_threads`` worker
+processes (:mod:`scenebot.dense.parallel`); on a GPU the stage is one process.
 """
 
 from __future__ import annotations
@@ -24,11 +28,11 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
+from scenebot.dense import passes
 from scenebot.dense import workspace as ws
 from scenebot.dense.colmap_cuda import run_patch_match
-from scenebot.dense.colmap_io import read_array, write_array
 from scenebot.dense.config import DenseConfig
-from scenebot.dense.patchmatch import DepthResult, PatchMatchSolver, StereoView
+from scenebot.dense.parallel import ViewPool, one_blas_thread, worker_count
 from scenebot.dense.views import ViewPlan, select_views
 from scenebot.taichi_setup import init_taichi, taichi_arch
 
@@ -92,78 +96,27 @@ def _subsample(plans: list[ViewPlan], max_views: int) -> list[ViewPlan]:
 
 
 def _run_taichi(
-    cfg: DenseConfig, rec: pycolmap.Reconstruction, plans: list[ViewPlan], dense_dir: Path
+    cfg: DenseConfig,
+    rec: pycolmap.Reconstruction,
+    plans: list[ViewPlan],
+    dense_dir: Path,
+    pool: ViewPool,
 ) -> list[dict]:
-    """Photometric pass, geometric pass and filter for every planned view."""
-    arch = init_taichi(cfg.taichi_arch, cfg.num_threads, cfg.patchmatch.seed)
-    LOG.info("dense: taichi PatchMatch on %s, %d views", arch, len(plans))
-    solver = PatchMatchSolver(cfg.patchmatch)
-    cache: dict[int, StereoView] = {}
-
-    def view(i: int) -> StereoView:
-        if i not in cache:
-            cache[i] = ws.load_view(rec, i, dense_dir)
-        return cache[i]
-
-    planned = {p.image_id for p in plans}
-    stats = {p.image_id: {"name": p.name} for p in plans}
-
-    def src_depths(p: ViewPlan, stage: str, saved: Path | None = None) -> list[np.ndarray]:
-        out = []
-        for s in p.sources:
-            name = rec.image(s).name
-            if saved is not None and (saved / f"{name}.bin").is_file():
-                out.append(read_array(saved / f"{name}.bin"))
-            elif s in planned:
-                out.append(ws.read_maps(dense_dir, name, stage)[0])
-            else:  # a source without depth of its own: no geometric evidence
-                out.append(np.zeros_like(view(s).gray))
-        return out
-
-    for p in plans:  # photometric pass
+    """Photometric pass, geometric pass and filter for every planned view, each step's views
+    spread over the pool's workers."""
+    LOG.info("dense: taichi PatchMatch on %s, %d views, %d process(es)", taichi_arch(),
+             len(plans), pool.workers)  # fmt: skip
+    tasks = passes.view_tasks(rec, plans)
+    shared = passes.PassSettings(cfg.patchmatch, dense_dir)
+    stats = [{"name": p.name} for p in plans]
+    for step in (passes.photometric, passes.geometric, passes.filtered):
         t0 = time.perf_counter()
-        res = solver.estimate(view(p.image_id), [view(s) for s in p.sources], p.depth_range)
-        stats[p.image_id]["photometric_s"] = time.perf_counter() - t0
-        ws.write_maps(dense_dir, p.name, "photometric", res.depth, res.normal)
-        write_array(ws.map_path(dense_dir, "cost", p.name, "photometric"), res.photo)
-    for p in plans:  # geometric pass, against the sources' photometric maps
-        t0 = time.perf_counter()
-        d0, n0 = ws.read_maps(dense_dir, p.name, "photometric")
-        if cfg.patchmatch.geom_iterations > 0:
-            res = solver.estimate(
-                view(p.image_id),
-                [view(s) for s in p.sources],
-                p.depth_range,
-                src_depths=src_depths(p, "photometric"),
-                init=(d0, n0),
-            )
-        else:  # no geometric pass: filter the photometric maps
-            photo = read_array(ws.map_path(dense_dir, "cost", p.name, "photometric"))
-            res = DepthResult(d0, n0, photo, photo)
-        stats[p.image_id]["geometric_s"] = time.perf_counter() - t0
-        # unfiltered geometric maps, so the filter can see every source's estimate
-        ws.write_maps(dense_dir, p.name, "geometric", res.depth, res.normal)
-        write_array(ws.map_path(dense_dir, "cost", p.name, "geometric"), res.photo)
-    # filter: photometric cost and agreement with the sources' (unfiltered) geometric maps;
-    # all unfiltered maps are read before any is overwritten by its filtered version
-    unfiltered = dense_dir / "stereo" / "unfiltered"
-    for p in plans:
-        t0 = time.perf_counter()
-        d, n = ws.read_maps(dense_dir, p.name, "geometric")
-        photo = read_array(ws.map_path(dense_dir, "cost", p.name, "geometric"))
-        res = solver.filter(
-            view(p.image_id),
-            [view(s) for s in p.sources],
-            DepthResult(d, n, photo, photo),
-            src_depths(p, "geometric", unfiltered),
-        )
-        stats[p.image_id]["filter_s"] = time.perf_counter() - t0
-        stats[p.image_id]["fraction_with_depth"] = float(np.mean(res.depth > 0))
-        # keep the unfiltered depth for the views that still use it as a source
-        write_array(unfiltered / f"{p.name}.bin", d)
-        ws.write_maps(dense_dir, p.name, "geometric", res.depth, res.normal)
-    shutil.rmtree(unfiltered, ignore_errors=True)
-    return [stats[p.image_id] for p in plans]
+        for st, out in zip(stats, pool.map(step, tasks, shared), strict=True):
+            st.update(out)
+        LOG.info("dense: %s step of %d views, %.1f s", step.__name__, len(plans),
+                 time.perf_counter() - t0)  # fmt: skip
+    passes.install_filtered(dense_dir, [p.name for p in plans])
+    return stats
 
 
 def _run_colmap_cuda(cfg: DenseConfig, plans: list[ViewPlan], dense_dir: Path) -> list[dict]:
@@ -241,15 +194,16 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
     plans, isolated = _plan_views(cfg, rec)
     ws.write_configs(dense_dir, {p.name: [rec.image(s).name for s in p.sources] for p in plans})
     backend = choose_backend(cfg)
-    t0 = time.perf_counter()
-    if backend == "colmap_cuda":
-        view_stats = _run_colmap_cuda(cfg, plans, dense_dir)
-    else:
-        view_stats = _run_taichi(cfg, rec, plans, dense_dir)
-    t_depth = time.perf_counter() - t0
-    fill_stats = None
-    if cfg.plane_fill.enabled:
-        fill_stats = _run_plane_fill(cfg, rec, plans, dense_dir, view_stats)
+    with one_blas_thread(), _view_pool(cfg, backend, dense_dir) as pool:
+        t0 = time.perf_counter()
+        if backend == "colmap_cuda":
+            view_stats = _run_colmap_cuda(cfg, plans, dense_dir)
+        else:
+            view_stats = _run_taichi(cfg, rec, plans, dense_dir, pool)
+        t_depth = time.perf_counter() - t0
+        fill_stats = None
+        if cfg.plane_fill.enabled:
+            fill_stats = _run_plane_fill(cfg, rec, plans, dense_dir, view_stats, pool)
     t0 = time.perf_counter()
     fused = fuse(cfg, dense_dir)
     t_fusion = time.perf_counter() - t0
@@ -259,6 +213,7 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
     summary = {
         "backend": backend,
         "taichi_arch": None if backend != "taichi" else taichi_arch(),
+        "processes": pool.workers,
         "num_views": len(plans),
         "skipped_views": isolated,
         "image_size": [rec.camera(rec.image(plans[0].image_id).camera_id).width,
@@ -275,6 +230,17 @@ def run(cfg: DenseConfig, inputs: DenseInputs, outputs: DenseOutputs) -> dict:
         _plots(rec, plans, dense_dir, outputs.fused_ply, fill_stats is not None)
     outputs.summary_json.write_text(json.dumps(summary, indent=1))
     return summary
+
+
+def _view_pool(cfg: DenseConfig, backend: str, dense_dir: Path) -> ViewPool:
+    """The processes that run the views: ``num_threads`` workers (taichi on one thread each)
+    where taichi runs on the CPU; this process alone on a GPU or with COLMAP's CUDA."""
+    on_cpu = False
+    if backend == "taichi":
+        on_cpu = init_taichi(cfg.taichi_arch, cfg.num_threads, cfg.patchmatch.seed) in (
+            "x64", "arm64")  # fmt: skip
+    return ViewPool(worker_count(cfg.num_threads, on_cpu), cfg.patchmatch.seed,
+                    dense_dir / "stereo")  # fmt: skip
 
 
 def _plan_views(cfg: DenseConfig, rec: pycolmap.Reconstruction) -> tuple[list[ViewPlan], list]:
@@ -313,9 +279,11 @@ def _run_plane_fill(
     plans: list[ViewPlan],
     dense_dir: Path,
     view_stats: list[dict],
+    pool: ViewPool,
 ) -> dict:
-    """Plane completion of the geometric maps; each view's share of pixels filled and culled
-    is added to its ``view_stats``. Returns the plane fill's stats without its views."""
+    """Plane completion of the geometric maps (each view's fill on the pool's workers); each
+    view's share of pixels filled and culled is added to its ``view_stats``. Returns the
+    plane fill's stats without its views."""
     from scenebot.dense.planefill import plane_fill
 
     fill_views = []
@@ -325,7 +293,7 @@ def _run_plane_fill(
         fill_views.append((p.name, rec.camera(img.camera_id).calibration_matrix(),
                            pose.rotation.matrix(), np.asarray(pose.translation),
                            p.depth_range))  # fmt: skip
-    fill_stats = plane_fill(dense_dir, fill_views, cfg.plane_fill)
+    fill_stats = plane_fill(dense_dir, fill_views, cfg.plane_fill, pool=pool)
     by_name = {v["name"]: v for v in fill_stats.pop("views")}
     for st in view_stats:
         v = by_name.get(st["name"], {})

@@ -13,6 +13,7 @@ Layout (what ``colmap image_undistorter`` writes, so COLMAP's own tools can read
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -102,34 +103,70 @@ def undistort(
     return pycolmap.Reconstruction(str(dense_dir / "sparse"))
 
 
-def load_view(rec: pycolmap.Reconstruction, image_id: int, dense_dir: str | Path) -> StereoView:
+@dataclass(frozen=True)
+class ViewCamera:
+    """A view of the workspace without its pixels (what a worker process needs to load it).
+
+    Attributes:
+        name: image name.
+        K: (3, 3) pinhole intrinsics.
+        R: (3, 3) cam_from_world rotation.
+        t: (3,) cam_from_world translation.
+        width: image width, pixels.
+        height: image height, pixels.
+    """
+
+    name: str
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+
+    @classmethod
+    def of_image(cls, rec: pycolmap.Reconstruction, image_id: int) -> ViewCamera:
+        """The camera of a registered image.
+
+        Raises:
+            ValueError: the camera is not a pinhole model.
+        """
+        img = rec.image(image_id)
+        cam = rec.camera(img.camera_id)
+        if cam.model_name not in ("PINHOLE", "SIMPLE_PINHOLE"):
+            raise ValueError(f"dense: camera of {img.name} is {cam.model_name}, expected a pinhole")
+        pose = img.cam_from_world()
+        t = np.asarray(pose.translation, dtype=np.float64)
+        K, R = cam.calibration_matrix(), pose.rotation.matrix()
+        return cls(img.name, K, R, t, cam.width, cam.height)
+
+
+def read_view(dense_dir: str | Path, cam: ViewCamera) -> StereoView:
     """Load an undistorted image as a grey :class:`StereoView`.
 
     Raises:
         FileNotFoundError: the undistorted image is missing.
-        ValueError: the camera is not a pinhole model or the image size does not match it.
+        ValueError: the image size does not match the camera.
     """
-    img = rec.image(image_id)
-    cam = rec.camera(img.camera_id)
-    path = Path(dense_dir) / "images" / img.name
+    path = Path(dense_dir) / "images" / cam.name
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
         raise FileNotFoundError(f"dense: undistorted image {path} is missing or unreadable")
-    if cam.model_name not in ("PINHOLE", "SIMPLE_PINHOLE"):
-        raise ValueError(f"dense: camera of {img.name} is {cam.model_name}, expected a pinhole")
     if bgr.shape[:2] != (cam.height, cam.width):
         raise ValueError(
             f"dense: {path} is {bgr.shape[1]}x{bgr.shape[0]}, camera says {cam.width}x{cam.height}"
         )
     gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255.0
-    pose = img.cam_from_world()
-    return StereoView(
-        name=img.name,
-        gray=gray,
-        K=cam.calibration_matrix(),
-        R=pose.rotation.matrix(),
-        t=np.asarray(pose.translation, dtype=np.float64),
-    )
+    return StereoView(name=cam.name, gray=gray, K=cam.K, R=cam.R, t=cam.t)
+
+
+def load_view(rec: pycolmap.Reconstruction, image_id: int, dense_dir: str | Path) -> StereoView:
+    """Load a registered image of the workspace as a grey :class:`StereoView`.
+
+    Raises:
+        FileNotFoundError: the undistorted image is missing.
+        ValueError: the camera is not a pinhole model or the image size does not match it.
+    """
+    return read_view(dense_dir, ViewCamera.of_image(rec, image_id))
 
 
 def map_path(dense_dir: str | Path, kind: str, name: str, stage: str) -> Path:

@@ -12,7 +12,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from scenebot.dense.config import PlaneFillConfig
-from scenebot.dense.planes.geometry import Plane, backproject, plane_extent
+from scenebot.dense.planes.geometry import Plane, backproject_pixels, plane_extent
 
 #: a plane within this angle (degrees) of the map's horizontal may be the floor
 LEVEL_DEG = 10.0
@@ -39,8 +39,8 @@ def thinned_cloud(
     """
     pts, nrms = [], []
     for d, nm, K, R, t in views:
-        ok = (d > 0) & (np.linalg.norm(nm, axis=-1) > 0.5)
-        X, N = backproject(d, K, R, t)[ok], nm[ok].astype(np.float64) @ R  # world normals
+        v, u = np.nonzero((d > 0) & (np.linalg.norm(nm, axis=-1) > 0.5))
+        X, N = backproject_pixels(d[v, u], v, u, K, R, t), nm[v, u].astype(np.float64) @ R
         if len(X) > points_per_view:
             pick = rng.choice(len(X), points_per_view, replace=False)
             X, N = X[pick], N[pick]
@@ -49,10 +49,22 @@ def thinned_cloud(
     cloud = np.concatenate(pts) if pts else np.zeros((0, 3))
     cloud_n = np.concatenate(nrms) if nrms else np.zeros((0, 3))
     if len(cloud):
-        keys = np.floor(cloud / voxel_m).astype(np.int64)
-        _, first = np.unique(keys, axis=0, return_index=True)
+        first = _first_per_voxel(np.floor(cloud / voxel_m).astype(np.int64))
         cloud, cloud_n = cloud[first], cloud_n[first]
     return cloud, cloud_n
+
+
+def _first_per_voxel(keys: np.ndarray) -> np.ndarray:
+    """The index of each voxel's first point, voxels in lexicographic order of their (N, 3)
+    integer ``keys``: ``np.unique(keys, axis=0, return_index=True)[1]``, from one integer
+    per voxel (several times faster) where the grid's cells fit in 62 bits."""
+    lo = keys.min(0)
+    span = keys.max(0) - lo + 1
+    if float(np.prod(span.astype(np.float64))) >= 2.0**62:
+        return np.unique(keys, axis=0, return_index=True)[1]
+    k = keys - lo
+    flat = (k[:, 0] * span[1] + k[:, 1]) * span[2] + k[:, 2]  # lexicographic order kept
+    return np.unique(flat, return_index=True)[1]
 
 
 def _fit_plane(x: np.ndarray) -> tuple[np.ndarray, float]:

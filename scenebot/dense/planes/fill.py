@@ -20,7 +20,13 @@ from __future__ import annotations
 import numpy as np
 
 from scenebot.dense.config import PlaneFillConfig
-from scenebot.dense.planes.geometry import Plane, behind_limit, camera_rays
+from scenebot.dense.planes.geometry import (
+    Plane,
+    behind_limit,
+    camera_rays,
+    image_window,
+    in_raster,
+)
 from scenebot.dense.planes.labels import CellVotes, neighbour_votes, pixel_labels
 
 
@@ -171,20 +177,27 @@ def _plane_hits(
     ray = ray_cam @ R  # world directions with unit z in the camera
     hits = np.full((len(planes), h * w), np.inf)
     hits_fill = np.full((len(planes), h * w), np.inf) if bounding_planes else None
+    pixel = np.arange(h * w).reshape(h, w)
     for j, pl in enumerate(planes):
-        denom = ray @ pl.normal
+        win = image_window(pl, K, R, t, shape)
+        if win is None:  # no ray of the view meets the plane's raster
+            continue
+        px = pixel[win].reshape(-1)  # only these rays can meet the plane's raster
+        ray_w = ray[px]
+        denom = ray_w @ pl.normal
         with np.errstate(divide="ignore", invalid="ignore"):
             z = -(centre @ pl.normal + pl.offset) / denom  # z-depth (ray has unit camera z)
-        ok = np.isfinite(z) & (z > 0)
+        idx = np.flatnonzero(np.isfinite(z) & (z > 0))
+        zi = z[idx]
+        cells = pl.cells(centre + zi[:, None] * ray_w[idx])  # once for both extents
         if hits_fill is not None:  # where a fill may put this plane: a boundary's extent
             # grown by the margin; an object's face only on its own cells (its edge is the
             # object's)
-            okf = ok & (np.abs(denom) > 0.1 * np.linalg.norm(ray, axis=1))
-            margin = extent_margin_m if pl.boundary else 0.0
-            okf[okf] = pl.inside(centre + z[okf, None] * ray[okf], margin)
-            hits_fill[j, okf] = z[okf]
-        ok[ok] = pl.inside(centre + z[ok, None] * ray[ok])
-        hits[j, ok] = z[ok]
+            okf = np.abs(denom[idx]) > 0.1 * np.linalg.norm(ray_w[idx], axis=1)
+            okf[okf] = in_raster(pl.grown(extent_margin_m if pl.boundary else 0.0), cells[okf])
+            hits_fill[j, px[idx[okf]]] = zi[okf]
+        ok = in_raster(pl.occupied, cells)
+        hits[j, px[idx[ok]]] = zi[ok]
     return ray, centre, hits, hits_fill
 
 

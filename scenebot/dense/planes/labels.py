@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenebot.dense.planes.geometry import Plane, backproject
+from scenebot.dense.planes.geometry import Plane, backproject_pixels
 
 #: the 8 search directions (row step, column step)
 DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
@@ -33,14 +33,18 @@ def pixel_labels(
     of ``distance_m`` and ``rel_distance`` of its depth), -1 where it lies on none or has
     no depth."""
     h, w = depth.shape
-    X = backproject(depth, K, R, t)
     label = np.full((h, w), -1, np.int32)  # -1: measured, off every plane
-    best = np.full((h, w), np.inf)
-    tol = np.maximum(distance_m, rel_distance * depth)
+    v, u = np.nonzero(measured)  # only measured pixels can lie on a plane
+    d = depth[v, u]
+    X = backproject_pixels(d, v, u, K, R, t)
+    lab = label[v, u]
+    best = np.full(len(d), np.inf)
+    tol = np.maximum(distance_m, rel_distance * d)
     for j, pl in enumerate(planes):
         dist = np.abs(X @ pl.normal + pl.offset)
-        on = measured & (dist < tol) & (dist < best)
-        label[on], best[on] = j, dist[on]
+        on = (dist < tol) & (dist < best)
+        lab[on], best[on] = j, dist[on]
+    label[v, u] = lab
     return label
 
 
@@ -88,20 +92,51 @@ def neighbour_votes(
 
 
 def _nearest_labels(cell_label: np.ndarray, measured: np.ndarray, max_steps: int) -> np.ndarray:
-    """(8, h, w) label of the nearest measured cell in each direction (-2: none found)."""
-    h, w = cell_label.shape
-    out = np.full((len(DIRECTIONS), h, w), -2, np.int32)
-    rows, cols = np.mgrid[0:h, 0:w]
+    """(8, h, w) label of the nearest measured cell in each direction, at most ``max_steps``
+    cells away (-2: none found)."""
+    out = np.full((len(DIRECTIONS), *cell_label.shape), -2, np.int32)
     for k, (dr, dc) in enumerate(DIRECTIONS):
-        found = np.zeros((h, w), bool)
-        for s in range(1, max_steps + 1):
-            r, c = rows + dr * s, cols + dc * s
-            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w) & ~found
-            if not ok.any():
-                break
-            rr, cc = r[ok], c[ok]
-            hit = measured[rr, cc]
-            sel = np.flatnonzero(ok)[hit]
-            out[k].flat[sel] = cell_label[rr[hit], cc[hit]]
-            found.flat[sel] = True
+        lab, meas, along_row = cell_label, measured, dr == 0
+        if along_row:  # down the columns of the transposed grid
+            lab, meas, dr, dc = lab.T, meas.T, dc, 0
+        if dr < 0:  # up: down the rows of the flipped grid
+            lab, meas = lab[::-1], meas[::-1]
+        near = _unshear(_nearest_below(_shear(lab, dc, -2), _shear(meas, dc, False), max_steps), dc)
+        near = near[::-1] if dr < 0 else near
+        out[k] = near.T if along_row else near
     return out
+
+
+def _shear(a: np.ndarray, dc: int, fill) -> np.ndarray:
+    """(h, w + h - 1) grid in which the step (1, dc) from (r, c) stays in its column: row
+    r shifted by ``-dc * r`` (``fill`` outside the grid); ``a`` itself for dc = 0."""
+    if dc == 0:
+        return a
+    h, w = a.shape
+    out = np.full((h, w + h - 1), fill, a.dtype)
+    rows = np.arange(h)[:, None]
+    out[rows, np.arange(w) - dc * rows + (h - 1 if dc > 0 else 0)] = a
+    return out
+
+
+def _unshear(a: np.ndarray, dc: int) -> np.ndarray:
+    """The (h, w) grid of a :func:`_shear` result."""
+    if dc == 0:
+        return a
+    h = a.shape[0]
+    w = a.shape[1] - h + 1
+    rows = np.arange(h)[:, None]
+    return a[rows, np.arange(w) - dc * rows + (h - 1 if dc > 0 else 0)]
+
+
+def _nearest_below(label: np.ndarray, measured: np.ndarray, max_steps: int) -> np.ndarray:
+    """(h, w) label of the nearest measured cell below each cell in its column, at most
+    ``max_steps`` rows away (-2: none)."""
+    h = label.shape[0]
+    rows = np.arange(h)[:, None]
+    at = np.where(measured, rows, h)  # row of a measured cell, h: none
+    nxt = np.minimum.accumulate(at[::-1], axis=0)[::-1]  # nearest measured row at or below
+    nxt = np.vstack([nxt[1:], np.full((1, label.shape[1]), h)])  # strictly below
+    found = (nxt < h) & (nxt - rows <= max_steps)
+    cols = np.broadcast_to(np.arange(label.shape[1]), label.shape)
+    return np.where(found, label[np.minimum(nxt, h - 1), cols], -2).astype(np.int32)
