@@ -50,9 +50,13 @@ def test_campaign_rows_come_from_snakemake_benchmark_files(tmp_path, runner):
     )
     rows = runner.bench_campaign(True, results=tmp_path)
     by = {r.name: r for r in rows}
-    assert by["office: round_000/sfm"].median == 98.0
-    assert by["office: dense"].median == 145.0 and by["office: dense"].repeats == 2
-    assert by["office: all stages recorded"].median == pytest.approx(243.0)
+    # one row per stage, summed over its jobs; a file with repeats counts their mean
+    assert by["office: sfm (1 jobs)"].median == pytest.approx(98.0)
+    assert by["office: sfm (1 jobs)"].cpu_wall == pytest.approx(121.6 / 98.0, abs=0.01)
+    assert "max RSS 300 MB" in by["office: sfm (1 jobs)"].note
+    assert by["office: dense (1 jobs)"].median == pytest.approx(145.0)
+    assert by["office: all jobs"].median == pytest.approx(243.0)
+    assert "CPU 337 s" in by["office: all jobs"].note
     assert all(r.ratio is None for r in rows)
 
 
