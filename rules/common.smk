@@ -70,7 +70,7 @@ def timed_products(wildcards):
         f"{RESULTS}/final/dense/fused.ply",
         f"{RESULTS}/final/tour/index.html",
     ]
-    return targets + (evaluation_products(wildcards) if SIMULATED else [])
+    return targets + (evaluation_products(wildcards) if EVALUATED else [])
 
 
 def round_dir(r):
@@ -171,11 +171,27 @@ def last_round_freespace(wildcards):
 
 
 SIMULATED = CFG.robot in ("sim", "nxt-emulated")  # the true scene is known
+# bring-your-own photos with their true cameras (evaluate.reference_cameras), and the scene
+# they were taken in (evaluate.reference_world): evaluated as far as the truth given allows
+REFERENCE = PHOTOS and CFG.evaluate.reference_cameras is not None
+SCENE_TRUTH = SIMULATED or (REFERENCE and CFG.evaluate.reference_world)
+EVALUATED = SIMULATED or REFERENCE
 
 
 def observable_input(wildcards):
-    """The observable surface, for simulated robots (no true scene otherwise)."""
-    return [f"{RESULTS}/eval/observable_surface.npz"] if SIMULATED else []
+    """The observable surface, where the true scene is known."""
+    return [f"{RESULTS}/eval/observable_surface.npz"] if SCENE_TRUTH else []
+
+
+def reference_source(wildcards):
+    """The file(s) of evaluate.reference_cameras (a file, or a COLMAP model folder)."""
+    path = Path(CFG.evaluate.reference_cameras)
+    return sorted(str(p) for p in path.glob("*")) if path.is_dir() else [str(path)]
+
+
+def reference_input(wildcards):
+    """robot: photos: the reference cameras as capture-log records (rule reference)."""
+    return [f"{RESULTS}/eval/reference_cameras.jsonl"] if REFERENCE else []
 
 
 def last_round_index(wildcards):
@@ -190,7 +206,7 @@ def captures_of_campaign(wildcards):
 
 def evaluation_products(wildcards):
     """Every round's evaluation and the observable surface (for `rule all` or `campaign`)."""
-    files = [f"{RESULTS}/eval/observable_surface.png"] if SIMULATED else []
+    files = [f"{RESULTS}/eval/observable_surface.png"] if SCENE_TRUTH else []
     for r in campaign_rounds():
         files += [f"{round_dir(r)}/evaluation.json", f"{round_dir(r)}/evaluation.png"]
     files += [f"{RESULTS}/final/evaluation.json", f"{RESULTS}/final/evaluation.png"]

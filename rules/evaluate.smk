@@ -29,6 +29,26 @@ rule observable:
         "--out {output.npz:q} --png {output.png:q} 2> >(tee {log:q} >&2)"
 
 
+# robot: photos with evaluate.reference_cameras: the photos' true cameras (a Middlebury
+# *_par.txt, a COLMAP model or a capture log) as capture-log records the evaluation reads.
+rule reference:
+    input:
+        code=stage_code("reference"),
+        cameras=reference_source,
+    output:
+        f"{RESULTS}/eval/reference_cameras.jsonl",
+    log:
+        f"{RESULTS}/logs/reference.log",
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("evaluate"),
+    shell:
+        "{params.py:q} -m scenebot reference --params {params.cfg:q} --out {output:q} "
+        "2> >(tee {log:q} >&2)"
+
+
 # One round's figures: photos per round, goals reached, SfM and localization accuracy. The
 # round does not wait for the campaign's end; the dense cloud is evaluated by evaluate_final.
 rule evaluate:
@@ -36,6 +56,7 @@ rule evaluate:
         code=stage_code("evaluate"),
         model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
         captures=captures_until,
+        reference=reference_input,
     output:
         json=f"{RESULTS}/round_{{r}}/evaluation.json",
         png=report(
@@ -54,10 +75,11 @@ rule evaluate:
         py=PY,
         cfg=stage_params("world", "sim", "evaluate"),
         scene_dir=lambda w, output: Path(output.json).parents[1],
+        reference=lambda w, input: options(reference=input.reference),
     shell:
         "{params.py:q} -m scenebot evaluate --params {params.cfg:q} "
         "--scene-dir {params.scene_dir:q} --round {wildcards.r} --out {output.json:q} "
-        "2> >(tee {log:q} >&2)"
+        "{params.reference} 2> >(tee {log:q} >&2)"
 
 
 # The campaign's result: the last round's figures plus the dense cloud's accuracy and
@@ -68,6 +90,7 @@ rule evaluate_final:
         model=last_round_model,
         captures=captures_of_campaign,
         observable=observable_input,
+        reference=reference_input,
         dense=f"{RESULTS}/final/dense/fused.ply",
     output:
         json=f"{RESULTS}/final/evaluation.json",
@@ -88,14 +111,16 @@ rule evaluate_final:
         cfg=stage_params("world", "sim", "evaluate"),
         scene_dir=lambda w, output: Path(output.json).parents[1],
         round=last_round_index,
-        dense=lambda w, input: f"--dense {input.dense!r}" if SIMULATED else "",
+        dense=lambda w, input: f"--dense {input.dense!r}" if EVALUATED else "",
+        reference=lambda w, input: options(reference=input.reference),
         observable=lambda w, input: (
             f"--observable {input.observable[0]!r}" if input.observable else ""
         ),
     shell:
         "{params.py:q} -m scenebot evaluate --params {params.cfg:q} "
         "--scene-dir {params.scene_dir:q} --round {params.round} {params.dense} "
-        "{params.observable} --out {output.json:q} 2> >(tee {log:q} >&2)"
+        "{params.observable} {params.reference} --out {output.json:q} "
+        "2> >(tee {log:q} >&2)"
 
 
 # `snakemake --cores 2 evaluation`: evaluate every round of the campaign.

@@ -411,6 +411,19 @@ class Config(Settings):
         return self
 
     @model_validator(mode="after")
+    def _reference_for_photos(self, info: ValidationInfo) -> Config:
+        ev = self.evaluate
+        if not _received(info, "evaluate") or self.robot == "photos":
+            return self
+        if ev.reference_cameras is not None or ev.reference_world or ev.reference_bbox:
+            raise ValueError(
+                "evaluate.reference_cameras, reference_world and reference_bbox are for robot: "
+                f"photos (a person's photos with known cameras); robot: {self.robot} logs the "
+                "true poses itself: remove them"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _camera_mount(self, info: ValidationInfo) -> Config:
         """The camera mount is configured once (sim.camera); following and the map's scale
         (sfm.camera_offset_m) use it unless set explicitly."""

@@ -49,8 +49,9 @@ def to_robot(x):
     return (np.asarray(x) - T_TRUE) @ R_TRUE / S_TRUE
 
 
-def write_round(tmp_path, n_photos=8, goals=()):
-    """A round_000 with a capture log (truth) and a COLMAP model in the robot frame."""
+def write_round(tmp_path, n_photos=8, goals=(), truth=True):
+    """A round_000 with a capture log (with the true poses unless ``truth`` is False) and a
+    COLMAP model in the robot frame."""
     cap = tmp_path / "round_000" / "capture"
     rng = np.random.default_rng(0)
     centers_w = np.c_[rng.uniform(2.2, 3.6, n_photos), rng.uniform(0.6, 2.4, n_photos),
@@ -60,10 +61,11 @@ def write_round(tmp_path, n_photos=8, goals=()):
     with CaptureLog(cap / "log.jsonl") as log:
         log.write({"type": "session", "robot": "sim"})
         for k in range(n_photos):
-            log.write({"type": "photo", "index": k, "image": f"images/im{k:04d}.jpg",
-                       "odometry": {"x": 0, "y": 0, "theta": 0},
-                       "truth": {"center": centers_w[k].tolist(),
-                                 "R_cam_from_world": Rw[k].tolist()}})  # fmt: skip
+            rec = {"type": "photo", "index": k, "image": f"images/im{k:04d}.jpg",
+                   "odometry": {"x": 0, "y": 0, "theta": 0}}  # fmt: skip
+            if truth:
+                rec["truth"] = {"center": centers_w[k].tolist(), "R_cam_from_world": Rw[k].tolist()}
+            log.write(rec)
         for g in goals:
             log.write({"type": "event", "event": g, "t": 1.0})
         log.write({"type": "end", "photos": n_photos})
@@ -235,12 +237,89 @@ def test_the_stage_writes_the_round_evaluation(tmp_path, scene, surf):
 
 
 def test_without_truth_only_counts_are_written(tmp_path):
-    cap, sfm = write_round(tmp_path)
+    cap, sfm = write_round(tmp_path, truth=False)
     cfg = Config.model_validate({"robot": "photos", "photos": {"folder": str(tmp_path)}})
     out = EvaluateOutputs(tmp_path / "ev.json")
     ev = run(cfg, EvaluateInputs(sfm, [cap], None, None, round_index=3), out)
     assert ev["round"] == 3 and ev["dense"] is None and ev["alignment"] is None
     assert ev["capture"]["photos_total"] == 8 and ev["notes"]
+
+
+def photos_cfg(tmp_path, **evaluate):
+    return Config.model_validate(
+        {"robot": "photos", "photos": {"folder": str(tmp_path)}, "evaluate": evaluate}
+    )
+
+
+def test_photos_with_reference_cameras_report_the_camera_errors(tmp_path, surf):
+    """robot: photos with evaluate.reference_cameras: the map is fitted to the given cameras
+    (errors ~0 here: the model is an exact similarity of them); with an object box the
+    dense cloud's share inside it is reported, and no scene metric is made up."""
+    from scenebot.evaluate.reference import read_reference_cameras, write_reference_log
+
+    cap, sfm = write_round(tmp_path)
+    ref = tmp_path / "eval" / "reference_cameras.jsonl"
+    write_reference_log(read_reference_cameras(cap / "log.jsonl"), ref)
+    box = [[0.5, 0.5, 0.0], [2.0, 2.5, 2.5]]
+    cfg = photos_cfg(tmp_path, reference_cameras=str(ref), reference_bbox=box)
+    ref_pts = surf.observable_points
+    inside = np.all((ref_pts >= box[0]) & (ref_pts <= box[1]), axis=1)
+    cloud = write_cloud(tmp_path / "fused.ply", to_robot(ref_pts))
+    out = EvaluateOutputs(tmp_path / "ev.json")
+    ev = run(cfg, EvaluateInputs(sfm, [ref], cloud, None, round_index=0), out, cfg.evaluate)
+    assert ev["alignment"]["scale"] == pytest.approx(S_TRUE, rel=1e-6)
+    r = ev["reference"]
+    assert r["cameras"] == 8 and r["registered"] == 8 and r["not_registered"] == []
+    assert r["centre_error"]["max"] < 1e-6
+    assert ev["dense"]["inside_bbox"] == pytest.approx(inside.mean(), abs=0.005)
+    assert "1cm" not in ev["dense"] and ev["localization"] is None
+    # one photo the map lacks is named
+    recs = [json.loads(x) for x in ref.read_text().splitlines()]
+    recs.append({**recs[0], "image": "extra.jpg"})
+    ref.write_text("".join(json.dumps(x) + "\n" for x in recs))
+    ev = run(cfg, EvaluateInputs(sfm, [ref], None, None, round_index=0), out, cfg.evaluate)
+    assert ev["reference"]["not_registered"] == ["extra.jpg"]
+
+
+def test_photos_taken_in_a_known_world_are_evaluated_like_a_simulated_robot(tmp_path, scene, surf):
+    cap, sfm = write_round(tmp_path)
+    keep = surf.observable_points[:, 0] < 2.0
+    cloud = write_cloud(tmp_path / "fused.ply", to_robot(surf.observable_points[keep]))
+    cfg = photos_cfg(tmp_path, reference_cameras=str(cap / "log.jsonl"), reference_world=True)
+    ecfg = ECFG.model_copy(update={"reference_cameras": cap / "log.jsonl", "reference_world": True})
+    obs = tmp_path / "eval" / "observable_surface.npz"
+    out = EvaluateOutputs(tmp_path / "ev.json")
+    ev = run(cfg, EvaluateInputs(sfm, [cap], cloud, obs, round_index=0), out, ecfg, scene=scene)
+    expect = surf.observable_weights[keep].sum() / surf.observable_weights.sum()
+    assert ev["dense"]["2cm"]["completeness"] == pytest.approx(expect, abs=0.01)
+    assert ev["reference"]["registered"] == 8
+
+
+def test_reference_cameras_read_the_same_from_every_format(tmp_path):
+    """A Middlebury par file, a COLMAP model and a capture log of the same cameras."""
+    from scenebot.evaluate.reference import ReferenceError, read_reference_cameras
+
+    cap, sfm = write_round(tmp_path)
+    from_log = read_reference_cameras(cap / "log.jsonl")
+    from_model = read_reference_cameras(sfm)  # the robot frame: same rotations up to R_TRUE
+    lines = [str(len(from_log))]
+    for name, (R, c) in from_log.items():
+        K = np.diag([500.0, 500.0, 1.0])
+        lines.append(" ".join([name, *map(str, K.ravel()), *map(str, R.ravel()),
+                               *map(str, -R @ c)]))  # fmt: skip
+    par = tmp_path / "cams_par.txt"
+    par.write_text("\n".join(lines) + "\n")
+    from_par = read_reference_cameras(par)
+    assert from_par.keys() == from_log.keys() == from_model.keys()
+    for name in from_log:
+        np.testing.assert_allclose(from_par[name][1], from_log[name][1], atol=1e-9)
+        np.testing.assert_allclose(from_par[name][0], from_log[name][0], atol=1e-9)
+        np.testing.assert_allclose(from_model[name][1], to_robot(from_log[name][1]), atol=1e-5)
+    par.write_text("1\nim0000.jpg 1 2 3\n")
+    with pytest.raises(ReferenceError, match="22 fields"):
+        read_reference_cameras(par)
+    with pytest.raises(ReferenceError, match="not found"):
+        read_reference_cameras(tmp_path / "nope.txt")
 
 
 def test_localization_estimates_are_compared_in_the_world_frame(tmp_path):

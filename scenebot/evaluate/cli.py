@@ -65,8 +65,10 @@ def cmd_evaluate(args) -> int:
     scene_dir = Path(args.scene_dir)
     rdir = scene_dir / f"round_{args.round:03d}"
     caps = [scene_dir / f"round_{k:03d}" / "capture" for k in range(args.round + 1)]
-    if cfg.robot == "photos" and args.round == 0:
+    if cfg.robot == "photos":  # round 0 is a folder of photos: its truth, if any, is given
         caps = [c for c in caps if (c / "log.jsonl").is_file()]
+        if args.reference:
+            caps = [Path(args.reference), *caps]
     inputs = EvaluateInputs(
         sfm_dir=rdir / "sfm",
         captures=caps,
@@ -79,6 +81,17 @@ def cmd_evaluate(args) -> int:
     out = Path(args.out) if args.out else rdir / "evaluation.json"
     ev = run(cfg, inputs, EvaluateOutputs(out, out.with_suffix(".png")), ecfg)
     print(main_summary(ev))
+    return 0
+
+
+def cmd_reference(args) -> int:
+    from scenebot.evaluate.reference import read_reference_cameras, write_reference_log
+
+    _, ecfg = load_settings(args)
+    if ecfg.reference_cameras is None:
+        raise SystemExit("evaluate.reference_cameras is not set: no reference cameras to write")
+    n = write_reference_log(read_reference_cameras(ecfg.reference_cameras), Path(args.out))
+    print(json.dumps({"reference_cameras": str(ecfg.reference_cameras), "cameras": n}))
     return 0
 
 
@@ -150,7 +163,8 @@ def add_parsers(sub) -> None:
     o = sub.add_parser("observable", help="observable surface of the simulated scene (cached)")
     e = sub.add_parser("evaluate", help="one round against the simulator's truth")
     v = sub.add_parser("validity", help="heuristic score vs ULR render quality (simulator)")
-    for sp in (o, e, v):
+    f = sub.add_parser("reference", help="evaluate.reference_cameras as capture-log records")
+    for sp in (o, e, v, f):
         sp.add_argument("--config", default="config.yaml", help="campaign config (YAML)")
         sp.add_argument("--params", help="stage parameters as JSON (used by the workflow)")
     o.add_argument("--out", required=True, help="eval/observable_surface.npz")
@@ -161,7 +175,12 @@ def add_parsers(sub) -> None:
     e.add_argument("--dense", help="fused cloud (PLY, robot frame) to evaluate")
     e.add_argument("--observable", help="observable-surface cache (default: <scene>/eval/...)")
     e.add_argument("--out", help="evaluation.json (default: <scene>/round_XXX/evaluation.json)")
+    e.add_argument(
+        "--reference", help="robot: photos: the reference cameras as log records (rule reference)"
+    )
     e.set_defaults(func=cmd_evaluate)
+    f.add_argument("--out", required=True, help="eval/reference_cameras.jsonl")
+    f.set_defaults(func=cmd_reference)
     v.add_argument("--scene-dir", required=True, help="results/<scene>")
     v.add_argument("--round", type=int, help="round studied (default: evaluate.validity_round)")
     v.add_argument("--dense", required=True, help="the campaign's fused cloud (PLY)")

@@ -1,9 +1,11 @@
-"""Settings of the ground-truth evaluation (simulated scenes only).
+"""Settings of the ground-truth evaluation (simulated scenes, or photos with reference cameras).
 
 Kept free of heavy imports: the workflow loads every stage's config at start.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 from pydantic import Field, field_validator
 
@@ -85,6 +87,45 @@ class EvaluateConfig(Settings):
         0, ge=0, description="Evaluate at most this many depth maps, evenly spread (0: all)."
     )
     plots: bool = Field(True, description="Write the PNG pictures.")
+
+    # --- bring-your-own photos (robot: photos) ---------------------------------------------
+    reference_cameras: Path | None = Field(
+        None,
+        description="robot: photos: the photos' true cameras, read by the evaluation only "
+        "(never by a decision): a Middlebury `*_par.txt` (`name k11..k33 r11..r33 t1 t2 t3` "
+        "per line, world to camera), a COLMAP model folder (cameras, images), or a scenebot "
+        "capture log.jsonl with true poses. Photos are matched by file name. The evaluation "
+        "then fits the map to these cameras (a robust similarity) and reports the "
+        "camera-centre errors in their units.",
+    )
+    reference_world: bool = Field(
+        False,
+        description="robot: photos: the photos were taken in the configured `world` (a "
+        "simulated scene, in the frame of evaluate.reference_cameras): the dense cloud is "
+        "evaluated against its observable surface as for a simulated robot.",
+    )
+    reference_bbox: list[list[float]] | None = Field(
+        None,
+        description="robot: photos of an object: its bounding box [[x0, y0, z0], [x1, y1, z1]] "
+        "in the frame of evaluate.reference_cameras; the evaluation reports the share of the "
+        "dense points inside it.",
+    )
+
+    @field_validator("reference_bbox")
+    @classmethod
+    def _box(cls, v: list[list[float]] | None) -> list[list[float]] | None:
+        if v is None:
+            return v
+        if (
+            len(v) != 2
+            or any(len(c) != 3 for c in v)
+            or any(a >= b for a, b in zip(*v, strict=True))
+        ):
+            raise ValueError(
+                "evaluate.reference_bbox must be [[x0, y0, z0], [x1, y1, z1]] with x0 < x1, "
+                f"y0 < y1, z0 < z1; got {v}"
+            )
+        return v
 
     @field_validator("thresholds_m")
     @classmethod

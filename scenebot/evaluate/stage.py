@@ -42,6 +42,7 @@ from scenebot.evaluate.metrics import (
     localization_accuracy,
     read_cloud,
     robot_to_world,
+    true_centers,
     true_photo_poses,
     weighted_cloud_metrics,
 )
@@ -102,9 +103,13 @@ def _scene(cfg, scene):
     return load_world_scene(cfg.world)
 
 
-def has_scene_truth(cfg) -> bool:
-    """Whether the campaign's robot is simulated (the true scene is known)."""
-    return cfg.robot in ("sim", "nxt-emulated")
+def has_scene_truth(cfg, ecfg: EvaluateConfig | None = None) -> bool:
+    """Whether the true scene is known: a simulated robot, or photos taken in the configured
+    world (``evaluate.reference_world``)."""
+    if cfg.robot in ("sim", "nxt-emulated"):
+        return True
+    ecfg = _evaluate_cfg(cfg, ecfg)
+    return cfg.robot == "photos" and ecfg.reference_world and ecfg.reference_cameras is not None
 
 
 def run_observable(cfg, outputs: ObservableOutputs, ecfg: EvaluateConfig | None = None,
@@ -125,10 +130,10 @@ def run_observable(cfg, outputs: ObservableOutputs, ecfg: EvaluateConfig | None 
     """
     from scenebot.evaluate.observable import load_or_compute, plot_observable
 
-    if not has_scene_truth(cfg):
+    if not has_scene_truth(cfg, ecfg):
         raise EvaluationError(
             f"robot {cfg.robot!r} has no true scene: the observable surface needs the simulator "
-            "(robot: sim or nxt-emulated)"
+            "(robot: sim or nxt-emulated, or robot: photos with evaluate.reference_world)"
         )
     ecfg = _evaluate_cfg(cfg, ecfg)
     t0 = time.perf_counter()
@@ -216,19 +221,34 @@ def run(
         "coverage_by_photos": None,
         "notes": [],
     }
-    truth = has_scene_truth(cfg) and stats["has_truth"]
-    if not truth:
+    cams = stats["has_truth"]  # true camera poses: a simulated capture, or reference cameras
+    truth = has_scene_truth(cfg, ecfg) and cams  # and the true scene
+    if not cams:
         out["notes"].append("no true poses in the capture logs: truth-based metrics skipped")
     sim = None
-    if truth:
+    if cams:
         try:
             sim = robot_to_world(inputs.sfm_dir, caps)
             out["alignment"] = sim.as_dict()
-            out["localization"] = localization_accuracy(caps, sim)
-            out["goals_truth"] = goal_truth(caps, sim, _reachable_test(cfg, _scene(cfg, scene)))
+            if truth:
+                out["localization"] = localization_accuracy(caps, sim)
+                sc = _scene(cfg, scene)
+                out["goals_truth"] = goal_truth(caps, sim, _reachable_test(cfg, sc))
         except EvaluationError as exc:
             out["notes"].append(str(exc))
+    if cfg.robot == "photos" and cams:
+        out["reference"] = _reference_summary(inputs.sfm_dir, caps, sim)
     surf = cloud = None
+    if sim is not None and not truth and inputs.dense_cloud is not None:
+        if ecfg.reference_bbox is not None:
+            cloud = sim.apply(read_cloud(inputs.dense_cloud, ecfg.max_cloud_points, ecfg.seed))
+            out["dense"] = {
+                "cloud": str(inputs.dense_cloud),
+                "points": len(cloud),
+                **bbox_share(cloud, np.asarray(ecfg.reference_bbox)),
+            }
+        else:
+            out["notes"].append("no true scene: the dense cloud is not evaluated")
     if truth and inputs.dense_cloud is not None:
         if sim is None:
             out["notes"].append("dense cloud not evaluated: no robot->world alignment")
@@ -270,6 +290,41 @@ def run(
     outputs.json.write_text(json.dumps(out, indent=1, default=json_default) + "\n")
     if outputs.png is not None and ecfg.plots:
         plot_evaluation(out, outputs.png, surf, cloud)
+    return out
+
+
+def bbox_share(cloud: np.ndarray, box: np.ndarray) -> dict:
+    """Share of the points inside the box ``[[x0, y0, z0], [x1, y1, z1]]``, and inside it
+    grown by a tenth of its diagonal (points on the object's support or just off it)."""
+    margin = 0.1 * float(np.linalg.norm(box[1] - box[0]))
+    inside = np.all((cloud >= box[0]) & (cloud <= box[1]), axis=1)
+    near = np.all((cloud >= box[0] - margin) & (cloud <= box[1] + margin), axis=1)
+    n = max(len(cloud), 1)
+    return {
+        "bbox": box.tolist(),
+        "inside_bbox": float(inside.sum() / n),
+        "near_bbox": float(near.sum() / n),
+        "near_margin": margin,
+    }
+
+
+def _reference_summary(sfm_dir: Path, caps: list[Path], sim) -> dict:
+    """robot: photos with reference cameras: how many there are, how many the map
+    registered, and the camera-centre errors after the similarity fit (reference units)."""
+    import pycolmap
+
+    ref = true_centers(caps)
+    rec = pycolmap.Reconstruction(str(sfm_dir))
+    names = {Path(rec.image(i).name).name for i in rec.reg_image_ids()}
+    out = {
+        "cameras": len(ref),
+        "registered": len(names & ref.keys()),
+        "not_registered": sorted(ref.keys() - names),
+        "note": "camera-centre errors after a robust similarity fit, in the reference's units",
+    }
+    if sim is not None:
+        out["centre_error"] = sim.residual_m
+        out["fit_photos"] = sim.photos
     return out
 
 
