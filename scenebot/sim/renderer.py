@@ -72,8 +72,10 @@ class _TextureAtlas:
         r0 = off + y0 * w
         r1 = off + y1 * w
         t = self.texels
-        top = t[r0 + x0] + (t[r0 + x1] - t[r0 + x0]) * fx
-        bot = t[r1 + x0] + (t[r1 + x1] - t[r1 + x0]) * fx
+        a, b = t[r0 + x0], t[r0 + x1]  # four gathers (each texel row once)
+        top = a + (b - a) * fx
+        a, b = t[r1 + x0], t[r1 + x1]
+        bot = a + (b - a) * fx
         return top + (bot - top) * fy
 
     def sample(self, m: np.ndarray, uv: np.ndarray, lod: np.ndarray) -> np.ndarray:
@@ -131,6 +133,7 @@ class Renderer:
         self._spec = np.array([m.specular for m in scene.materials], np.float64)
         self._shin = np.array([m.shininess for m in scene.materials], np.float64)
         self._emissive = np.array([m.emissive for m in scene.materials], bool)
+        self._ray_cache: dict[tuple, np.ndarray] = {}
 
     # ----------------------------------------------------------------- ray casting
     def cast(self, origins: np.ndarray, dirs: np.ndarray) -> dict[str, np.ndarray]:
@@ -199,16 +202,24 @@ class Renderer:
 
     # ------------------------------------------------------------------- images
     def _pixel_rays(self, intr: Intrinsics, R: np.ndarray, offsets=(0.5, 0.5), pix=None):
-        if pix is None:
-            jj, ii = np.meshgrid(np.arange(intr.width), np.arange(intr.height))
-            jj, ii = jj.ravel(), ii.ravel()
+        if pix is None:  # every pixel: the camera-frame rays depend on the intrinsics only
+            key = (intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy, *offsets)
+            d_cam = self._ray_cache.get(key)
+            if d_cam is None:
+                jj, ii = np.meshgrid(np.arange(intr.width), np.arange(intr.height))
+                d_cam = self._camera_rays(intr, offsets, ii.ravel(), jj.ravel())
+                self._ray_cache = {key: d_cam}  # one camera at a time
         else:
-            ii, jj = pix
+            d_cam = self._camera_rays(intr, offsets, *pix)
+        return d_cam @ R  # world = R^T d_cam (row vectors)
+
+    @staticmethod
+    def _camera_rays(intr: Intrinsics, offsets, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
         x = (jj + offsets[0] - intr.cx) / intr.fx
         y = (ii + offsets[1] - intr.cy) / intr.fy
         d_cam = np.stack([x, y, np.ones_like(x)], axis=1)
         d_cam /= np.linalg.norm(d_cam, axis=1, keepdims=True)
-        return d_cam @ R  # world = R^T d_cam (row vectors)
+        return d_cam
 
     def render(
         self,
