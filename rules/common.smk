@@ -99,9 +99,9 @@ def round_products(wildcards):
         if not (PHOTOS and r == 0):
             files += [f"{d}/capture/log.jsonl", f"{d}/capture/trajectory.png"]
         files += [f"{d}/sfm/{f}" for f in ("report.json", "map.png")]
-        files += [
-            f"{d}/{f}" for f in ("goals.json", "goals.png", "paths.json", "navgrid.png")
-        ]
+        files += [f"{d}/{f}" for f in ("goals.json", "goals.png")]
+        if not PHOTOS:  # a person's photos: no robot to plan paths for
+            files += [f"{d}/{f}" for f in ("paths.json", "navgrid.png")]
     return files
 
 
@@ -126,6 +126,12 @@ def previous_goals(wildcards):
     r = int(wildcards.r)
     prev = f"{RESULTS}/round_{r - 1:03d}"
     return [f"{prev}/goals.json", f"{prev}/freespace.npz"] if r > 0 else []
+
+
+def person_mesh(wildcards):
+    """The round's mesh for the goals stage of a person's photos (its coverage picture:
+    how many photos saw each part of the surface); a robot's goals do not read it."""
+    return [f"{round_dir(wildcards.r)}/mesh.ply"] if PHOTOS else []
 
 
 def captures_until(wildcards):

@@ -123,6 +123,7 @@ rule goals:
         candidates=f"{RESULTS}/round_{{r}}/candidates.csv",
         freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
         previous=previous_goals,
+        mesh=person_mesh,
     output:
         goals=f"{RESULTS}/round_{{r}}/goals.json",
         picture=report(
@@ -144,6 +145,7 @@ rule goals:
         previous=lambda w, input: options(
             previous_goals_json=input.previous[:1],
             previous_freespace_npz=input.previous[1:],
+            mesh_ply=input.mesh,
         ),
     shell:
         "{params.py:q} -m scenebot goals --params {params.cfg:q} --sfm-dir {params.sfm:q} "

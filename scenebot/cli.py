@@ -53,7 +53,7 @@ STAGE_FILES = {
     "mesh": ("sfm_dir", "mesh_ply", "freespace_json", "freespace_npz", "freespace_png?"),
     "score": ("sfm_dir", "mesh_ply", "freespace_npz", "candidates_csv", "views_png?"),
     "goals": ("candidates_csv", "freespace_npz", "sfm_dir?", "previous_goals_json?",
-              "previous_freespace_npz?", "goals_json", "goals_png?"),
+              "previous_freespace_npz?", "mesh_ply?", "goals_json", "goals_png?"),
     "plan": ("sfm_dir", "goals_json", "navgrid_npz", "paths_json", "plot_png?"),
 }  # fmt: skip
 
@@ -93,7 +93,9 @@ def cmd_mesh(args) -> int:
     from scenebot.mesh.stage import MeshInputs, MeshOutputs, run
 
     cfg = _config(args)
-    print(json.dumps(run(cfg.mesh, files(args, MeshInputs), files(args, MeshOutputs)), default=str))
+    person = cfg.robot == "photos"  # a person's photos: six degrees of freedom
+    summary = run(cfg.mesh, files(args, MeshInputs), files(args, MeshOutputs), person=person)
+    print(json.dumps(summary, default=str))
     return 0
 
 
@@ -101,7 +103,8 @@ def cmd_score(args) -> int:
     from scenebot.score.stage import ScoreInputs, ScoreOutputs, run
 
     cfg = _config(args)
-    summary = run(cfg.score, files(args, ScoreInputs), files(args, ScoreOutputs))
+    person = cfg.robot == "photos"
+    summary = run(cfg.score, files(args, ScoreInputs), files(args, ScoreOutputs), person=person)
     print(json.dumps(summary, default=str))
     return 0
 
@@ -110,7 +113,9 @@ def cmd_goals(args) -> int:
     from scenebot.goals.stage import GoalsInputs, GoalsOutputs, run
 
     cfg = _config(args)
-    print(json.dumps(run(cfg.goals, files(args, GoalsInputs), files(args, GoalsOutputs))))
+    person = cfg.robot == "photos"
+    doc = run(cfg.goals, files(args, GoalsInputs), files(args, GoalsOutputs), person=person)
+    print(json.dumps(doc))
     return 0
 
 

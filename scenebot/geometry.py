@@ -103,6 +103,29 @@ def planar_cam_from_world(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np
     return np.concatenate([R.reshape(-1, 9), t], axis=1)
 
 
+def tilted_cam_from_world(xyz: np.ndarray, theta: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """Rotation and translation of cameras anywhere, looking along ``theta`` tilted up by
+    ``pitch``, with no roll (``look_rotation`` for many cameras at once; a person's camera).
+
+    Args:
+        xyz: (N, 3) camera centres (m).
+        theta: (N,) heading (rad).
+        pitch: (N,) tilt (rad, up positive).
+
+    Returns:
+        (N, 12) array: R row-major (9) then t (3), cam_from_world.
+    """
+    C = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    th, pi = (np.atleast_1d(np.asarray(a, dtype=np.float64)) for a in (theta, pitch))
+    ch, sh, cp, sp = np.cos(th), np.sin(th), np.cos(pi), np.sin(pi)
+    fwd = np.stack([cp * ch, cp * sh, sp], axis=1)
+    right = np.stack([sh, -ch, np.zeros_like(ch)], axis=1)
+    down = np.cross(fwd, right)
+    R = np.stack([right, down, fwd], axis=1)  # rows: camera x, y, z axes
+    t = -np.einsum("nij,nj->ni", R, C)
+    return np.concatenate([R.reshape(-1, 9), t], axis=1)
+
+
 def robot_xy_for_camera(
     camera_xy: np.ndarray, heading: float, camera_offset_m: tuple[float, float]
 ) -> np.ndarray:

@@ -5,6 +5,11 @@ Files: ``freespace.json`` (polygons in metres, GeoJSON-like ``MultiPolygon`` coo
 holes, plus the raster's geometry), ``freespace.npz`` (the raster ``mask`` (ny, nx) uint8, its
 ``origin`` (x, y of the corner of cell (0, 0), m), ``resolution`` (m) and the cut ``segments``
 (M, 2, 2) in metres), and a picture.
+
+With ``robot: photos`` (a person's photos, six degrees of freedom) the mesh stage writes a 3-D
+free space too (:class:`FreeVolume`): ``freespace.npz`` then also holds the voxel grid
+(``volume_*`` arrays) and ``freespace.json`` a ``volume`` section; the 2-D raster is then the
+free voxels' layer at the photos' median camera height, for the readers that work in a plane.
 """
 
 from __future__ import annotations
@@ -131,8 +136,15 @@ class FreeSpace:
             polys.append(rings)
         return polys
 
-    def save(self, json_path: str | Path, npz_path: str | Path, round_name: str) -> None:
-        """Write ``freespace.json`` and ``freespace.npz``."""
+    def save(
+        self,
+        json_path: str | Path,
+        npz_path: str | Path,
+        round_name: str,
+        volume: FreeVolume | None = None,
+    ) -> None:
+        """Write ``freespace.json`` and ``freespace.npz`` (with ``volume``: the 3-D free space
+        of a person's photos as well)."""
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(
             npz_path,
@@ -142,6 +154,7 @@ class FreeSpace:
             segments=self.segments,
             robot_radius=np.float64(self.robot_radius),
             closed=np.bool_(self.closed),
+            **({} if volume is None else volume.arrays()),
         )
         doc = {
             "round": round_name,
@@ -159,6 +172,9 @@ class FreeSpace:
                 "shape_yx": list(self.mask.shape),
             },
         }
+        if volume is not None:
+            doc["frame"] = "map frame of a person's photos (z up)"
+            doc["volume"] = volume.summary()
         Path(json_path).write_text(json.dumps(doc, indent=1))
 
     @staticmethod
@@ -176,6 +192,144 @@ class FreeSpace:
             segments=z["segments"],
             robot_radius=float(z["robot_radius"]),
             closed=bool(z["closed"]),
+        )
+
+
+@dataclass
+class FreeVolume:
+    """The 3-D free space of a person's photos: voxels that lines of sight crossed, away from
+    the map's surface (computed by :mod:`scenebot.mesh.volume`).
+
+    Attributes:
+        free: (nz, ny, nx) bool, True = free (index k is z, j is y, i is x).
+        rays: (nz, ny, nx) int32 lines of sight crossing each voxel (count).
+        origin: (3,) x, y, z of the outer corner of voxel (0, 0, 0) (m).
+        voxel: voxel edge (m).
+        clearance: distance (m) kept from the map's points and mesh.
+        cameras: (S, 3) the map's camera centres (m).
+        min_voxels: fewer free voxels than this is degenerate (``mesh.volume.min_voxels``).
+    """
+
+    free: np.ndarray
+    rays: np.ndarray
+    origin: np.ndarray
+    voxel: float
+    clearance: float
+    cameras: np.ndarray
+    min_voxels: int
+
+    @property
+    def n_free(self) -> int:
+        """Free voxels (count)."""
+        return int(self.free.sum())
+
+    @property
+    def volume_m3(self) -> float:
+        """Free volume (m^3)."""
+        return self.n_free * self.voxel**3
+
+    @property
+    def camera_height(self) -> float:
+        """The photos' median camera height (m): the reference of a person's heights."""
+        return float(np.median(self.cameras[:, 2])) if len(self.cameras) else 0.0
+
+    def voxel_of(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Voxel indices (k, j, i) of points (N, 3) (m), clipped, and whether they fall inside
+        the grid."""
+        xyz = np.asarray(xyz, np.float64).reshape(-1, 3)
+        ijk = np.floor((xyz - self.origin) / self.voxel).astype(np.int64)
+        shape = np.array(self.free.shape[::-1])  # (nx, ny, nz)
+        ok = np.all((ijk >= 0) & (ijk < shape), axis=1)
+        ijk = np.clip(ijk, 0, shape - 1)
+        return ijk[:, 2], ijk[:, 1], ijk[:, 0], ok
+
+    def contains(self, xyz: np.ndarray) -> np.ndarray:
+        """(N,) bool: points (N, 3) (m) in a free voxel."""
+        k, j, i, ok = self.voxel_of(xyz)
+        return ok & self.free[k, j, i]
+
+    def centres(self, k: np.ndarray, j: np.ndarray, i: np.ndarray) -> np.ndarray:
+        """(N, 3) centres (m) of voxels (k, j, i)."""
+        return self.origin + (np.stack([i, j, k], 1) + 0.5) * self.voxel
+
+    def layer(self, z: float) -> np.ndarray:
+        """(ny, nx) bool: the free voxels of the layer holding height ``z`` (m); none outside
+        the grid."""
+        k = int(np.floor((z - self.origin[2]) / self.voxel))
+        if not 0 <= k < self.free.shape[0]:
+            return np.zeros(self.free.shape[1:], bool)
+        return self.free[k].copy()
+
+    def degenerate(self) -> str | None:
+        """Why this free space says nothing of where a person can stand, or None: too few
+        voxels, or no camera of the map in or next to it."""
+        if self.n_free < self.min_voxels:
+            return (
+                f"{self.n_free} free voxels, fewer than mesh.volume.min_voxels = {self.min_voxels}"
+            )
+        reach = int(np.ceil(self.clearance / self.voxel)) + 1
+        k, j, i, ok = self.voxel_of(self.cameras)
+        nz, ny, nx = self.free.shape
+        for a, b, c, o in zip(k, j, i, ok, strict=True):
+            box = self.free[max(a - reach, 0) : min(a + reach + 1, nz),
+                            max(b - reach, 0) : min(b + reach + 1, ny),
+                            max(c - reach, 0) : min(c + reach + 1, nx)]  # fmt: skip
+            if o and box.any():
+                return None
+        return "no camera of the map lies in or next to the free space"
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The ``volume_*`` arrays of ``freespace.npz``."""
+        return {
+            "volume_free": self.free.astype(np.uint8),
+            "volume_rays": self.rays.astype(np.int32),
+            "volume_origin": np.asarray(self.origin, np.float64),
+            "volume_voxel_m": np.float64(self.voxel),
+            "volume_clearance_m": np.float64(self.clearance),
+            "volume_cameras": np.asarray(self.cameras, np.float64).reshape(-1, 3),
+            "volume_min_voxels": np.int64(self.min_voxels),
+        }
+
+    def summary(self) -> dict:
+        """The ``volume`` section of ``freespace.json``."""
+        return {
+            "file": "freespace.npz (volume_free: (nz, ny, nx) uint8, 1 = free; volume_rays: "
+            "lines of sight per voxel)",
+            "origin_xyz_m": np.round(self.origin, 6).tolist(),
+            "voxel_m": self.voxel,
+            "shape_zyx": list(self.free.shape),
+            "free_voxels": self.n_free,
+            "volume_m3": round(self.volume_m3, 6),
+            "clearance_m": self.clearance,
+            "camera_height_m": round(self.camera_height, 6),
+            "degenerate": self.degenerate(),
+        }
+
+    @staticmethod
+    def load(npz_path: str | Path) -> FreeVolume:
+        """Read the 3-D free space of ``freespace.npz``.
+
+        Raises:
+            FreeSpaceError: the file holds none (the mesh stage ran for a robot).
+        """
+        if not Path(npz_path).exists():
+            raise FileNotFoundError(
+                f"{npz_path}: no free space here; run the mesh stage for this round first"
+            )
+        z = np.load(npz_path)
+        if "volume_free" not in z.files:
+            raise FreeSpaceError(
+                f"{npz_path}: no 3-D free space (the mesh stage ran for a robot); run it "
+                "again with robot: photos"
+            )
+        return FreeVolume(
+            free=z["volume_free"].astype(bool),
+            rays=z["volume_rays"],
+            origin=z["volume_origin"],
+            voxel=float(z["volume_voxel_m"]),
+            clearance=float(z["volume_clearance_m"]),
+            cameras=z["volume_cameras"],
+            min_voxels=int(z["volume_min_voxels"]),
         )
 
 

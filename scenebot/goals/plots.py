@@ -1,4 +1,5 @@
-"""The goals stage's pictures: goals on the score heat map, or the frontier (matplotlib, Agg)."""
+"""The goals stage's pictures: goals on the score heat map, or the frontier; for a person, the
+next shots as frusta and the surface's coverage (matplotlib, Agg)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.artifacts.freespace import FreeSpace, draw_freespace
+from scenebot.artifacts.freespace import FreeSpace, FreeVolume, draw_freespace
+from scenebot.geometry import Intrinsics, tilted_cam_from_world
 from scenebot.pictures import pyplot
 
 
@@ -81,4 +83,109 @@ def plot_frontier(
     ax.set_title(title + "\nblue: seen free space, orange: unseen, magenta: frontier")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def frustum_lines(poses: np.ndarray, intr: Intrinsics, depth: float) -> np.ndarray:
+    """Edges of camera frusta: centre to the four far corners, and the far rectangle.
+
+    Args:
+        poses: (N, 5) x, y, z (m), theta, pitch (rad).
+        intr: the camera.
+        depth: distance of the far rectangle (m).
+
+    Returns:
+        (N, 8, 2, 3) line segments (m).
+    """
+    Rt = tilted_cam_from_world(poses[:, :3], poses[:, 3], poses[:, 4])
+    R = Rt[:, :9].reshape(-1, 3, 3)
+    u = np.array([0.0, intr.width, intr.width, 0.0])
+    v = np.array([0.0, 0.0, intr.height, intr.height])
+    cam = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones(4)], 1) * depth
+    corners = poses[:, None, :3] + np.einsum("nji,kj->nki", R, cam)  # (N, 4, 3)
+    C = np.broadcast_to(poses[:, None, :3], corners.shape)
+    rays = np.stack([C, corners], axis=2)
+    rim = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2)
+    return np.concatenate([rays, rim], axis=1)
+
+
+def plot_person_goals(
+    path: str | Path,
+    vol: FreeVolume,
+    taken: np.ndarray,
+    intr: Intrinsics,
+    goals: np.ndarray,
+    gains: np.ndarray,
+    surface: np.ndarray,
+    seen_by: np.ndarray,
+    title: str,
+) -> None:
+    """A person's advice: the next shots as camera frusta over a top and a side view, with the
+    photos already taken and each shot's predicted gain, and the surface coloured by how many
+    photos saw it (seen by fewer than 2: marked red).
+
+    Args:
+        path: output PNG.
+        vol: the 3-D free space (drawn as its top and side shadows).
+        taken: (S, 5) the photos taken, as x, y, z, theta, pitch.
+        intr: the camera.
+        goals: (K, 5) the next shots, best first.
+        gains: (K,) their view scores (degrees: the predicted rendering error a photo there
+            removes).
+        surface: (P, 3) mesh vertices (m).
+        seen_by: (P,) photos seeing each.
+        title: figure title.
+    """
+    from matplotlib.collections import LineCollection
+
+    plt = pyplot()
+    fig, axes = plt.subplots(2, 2, figsize=(15, 12))
+    o, vx = vol.origin, vol.voxel
+    nz, ny, nx = vol.free.shape
+    ext = {(0, 1): [o[0], o[0] + nx * vx, o[1], o[1] + ny * vx],
+           (0, 2): [o[0], o[0] + nx * vx, o[2], o[2] + nz * vx]}  # fmt: skip
+    shadow = {(0, 1): vol.free.any(axis=0), (0, 2): vol.free.any(axis=1)}
+    pts = np.concatenate([surface, taken[:, :3]]) if len(surface) else taken[:, :3]
+    depth = 0.12 * float(np.max(np.ptp(pts, axis=0))) if len(pts) > 1 else 0.3
+    colours = plt.get_cmap("autumn")(np.linspace(0, 0.8, max(len(goals), 1)))
+    for col, (a, b) in enumerate(((0, 1), (0, 2))):
+        ax = axes[0, col]
+        ax.imshow(shadow[(a, b)], origin="lower", extent=ext[(a, b)], cmap="Greys_r",
+                  vmin=-1.5, vmax=1.2, interpolation="nearest")  # fmt: skip
+        ax.plot(surface[:, a], surface[:, b], ".", color="0.35", ms=1, alpha=0.4)
+        segs = frustum_lines(taken, intr, 0.5 * depth)[..., [a, b]].reshape(-1, 2, 2)
+        ax.add_collection(LineCollection(segs, colors="tab:blue", linewidths=0.6, alpha=0.7))
+        ax.plot(taken[:, a], taken[:, b], "o", color="tab:blue", ms=3, label="photos taken")
+        for r, g in enumerate(goals):
+            segs = frustum_lines(g[None], intr, depth)[0][..., [a, b]]
+            ax.add_collection(LineCollection(segs, colors=[colours[r]], linewidths=2))
+            ax.text(g[a], g[b], f" {r}: {gains[r]:.0f} deg", color="k", fontsize=9,
+                    fontweight="bold", va="bottom")  # fmt: skip
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("yz"[b - 1] + " (m)")
+        ax.set_title(("top" if b == 1 else "side") + " view: next shots (rank: predicted gain)")
+        ax.autoscale()
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    few = seen_by < 2
+    for col, (a, b) in enumerate(((0, 1), (0, 2))):
+        ax = axes[1, col]
+        order = np.argsort(-seen_by) if b == 1 else np.argsort(surface[:, 1])
+        top = max(int(seen_by.max(initial=2)), 2)
+        sc = ax.scatter(surface[order, a], surface[order, b], c=seen_by[order], s=3,
+                        cmap="viridis", vmin=0, vmax=top)  # fmt: skip
+        ax.scatter(surface[few, a], surface[few, b], s=6, color="red", marker="x",
+                   linewidths=0.6, label="seen by < 2 photos")  # fmt: skip
+        ax.plot(taken[:, a], taken[:, b], "o", color="tab:blue", ms=3)
+        fig.colorbar(sc, ax=ax, fraction=0.046, label="photos seeing the surface")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("yz"[b - 1] + " (m)")
+        frac = float(few.mean()) if len(few) else 0.0
+        ax.set_title(f"coverage ({'top' if b == 1 else 'side'}): {100 * frac:.0f}% of the "
+                     "surface seen by < 2 photos")  # fmt: skip
+    axes[1, 0].legend(loc="upper right", fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -56,6 +56,54 @@ def select_goals(
     return np.array(chosen, dtype=np.int64)
 
 
+def view_directions(theta: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """(N, 3) unit viewing directions of headings ``theta`` tilted up by ``pitch`` (rad)."""
+    t, p = np.asarray(theta, float), np.asarray(pitch, float)
+    return np.stack([np.cos(p) * np.cos(t), np.cos(p) * np.sin(t), np.sin(p)], axis=-1)
+
+
+def select_goals_3d(
+    poses: np.ndarray,
+    score: np.ndarray,
+    k: int,
+    radius_m: float,
+    angle_deg: float,
+    valid: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`select_goals` for a person's six-degree-of-freedom candidates: a candidate is
+    suppressed when an already chosen goal is closer than ``radius_m`` in 3-D AND its viewing
+    direction (heading and pitch) is within ``angle_deg`` of the goal's.
+
+    Args:
+        poses: (N, 5) x, y, z (m), theta, pitch (rad).
+        score: (N,) view scores (degrees; higher = poorer predicted rendering); NaN is skipped.
+        k: most goals.
+        radius_m: suppression radius (m).
+        angle_deg: suppression angle between viewing directions (degrees).
+        valid: (N,) bool, candidates allowed at all (default all).
+
+    Returns:
+        (<= k,) indices of the chosen candidates, best first.
+    """
+    score = np.asarray(score, np.float64)
+    ok = np.isfinite(score) if valid is None else (np.isfinite(score) & valid)
+    idx = np.nonzero(ok)[0]
+    idx = idx[np.argsort(-score[idx], kind="stable")]
+    dirs = view_directions(poses[:, 3], poses[:, 4])
+    cos_thr = np.cos(np.deg2rad(angle_deg))
+    chosen: list[int] = []
+    for c in idx:
+        if len(chosen) == k:
+            break
+        if chosen:
+            near = np.linalg.norm(poses[chosen, :3] - poses[c, :3], axis=1) < radius_m
+            same = dirs[chosen] @ dirs[c] >= cos_thr
+            if (near & same).any():
+                continue
+        chosen.append(int(c))
+    return np.array(chosen, dtype=np.int64)
+
+
 def goals_document(
     poses: np.ndarray,
     score: np.ndarray,
@@ -71,7 +119,8 @@ def goals_document(
     case the goals are still listed (for information) but the workflow should stop exploring.
 
     Args:
-        poses: (N, 3) candidate poses.
+        poses: (N, 3) a robot's candidate poses, or (N, 5) a person's (x, y, z, theta,
+            pitch): their goals also give z and pitch.
         score: (N,) view scores (degrees).
         chosen: indices from :func:`select_goals`.
         threshold_deg: completeness threshold (degrees).
@@ -83,28 +132,36 @@ def goals_document(
     """
     finite = np.isfinite(score)
     best = float(np.max(score[finite])) if finite.any() else float("nan")
+    person = poses.shape[1] == 5
     doc = {
         "round": round_name,
         "complete": bool(finite.any() and best < threshold_deg),
         "best_score_deg": None if not np.isfinite(best) else round(best, 4),
         "threshold_deg": threshold_deg,
         "n_candidates": len(score),
-        "pose_convention": "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)",
-        "goals": [
-            {
-                "rank": r,
-                "candidate": int(c),
-                "x": round(float(poses[c, 0]), 4),
-                "y": round(float(poses[c, 1]), 4),
-                "theta": round(float(poses[c, 2]), 5),
-                "score_deg": round(float(score[c]), 4),
-            }
-            for r, c in enumerate(chosen)
-        ],
+        "pose_convention": (
+            "camera centre x, y, z (map frame), heading theta (rad, ccw from x) and pitch "
+            "(rad, up positive), roll 0"
+            if person
+            else "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)"
+        ),
+        "goals": [_goal(r, int(c), poses, score) for r, c in enumerate(chosen)],
     }
     if extra:
         doc.update(extra)
     return doc
+
+
+def _goal(rank: int, c: int, poses: np.ndarray, score: np.ndarray) -> dict:
+    """One goal of goals.json: a robot's x, y, theta, or a person's x, y, z, theta, pitch."""
+    if poses.shape[1] == 5:
+        x, y, z, t, p = (float(v) for v in poses[c])
+        pose = {"x": round(x, 4), "y": round(y, 4), "z": round(z, 4), "theta": round(t, 5),
+                "pitch": round(p, 5)}  # fmt: skip
+    else:
+        pose = {"x": round(float(poses[c, 0]), 4), "y": round(float(poses[c, 1]), 4),
+                "theta": round(float(poses[c, 2]), 5)}  # fmt: skip
+    return {"rank": rank, "candidate": c, **pose, "score_deg": round(float(score[c]), 4)}
 
 
 def write_goals(path: str | Path, doc: dict) -> None:

@@ -28,6 +28,7 @@ class GoalsInputs:
     sfm_dir: Path | None = None  # the map (camera poses); the frontier method needs it
     previous_goals_json: Path | None = None  # the previous round's (diminishing returns)
     previous_freespace_npz: Path | None = None  # the previous round's (its new free space)
+    mesh_ply: Path | None = None  # the map's surface: a person's coverage picture needs it
 
 
 @dataclass
@@ -38,8 +39,15 @@ class GoalsOutputs:
     goals_png: Path | None = None
 
 
-def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> dict:
+def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bool = False) -> dict:
     """Choose the goals of the next round and decide whether exploration is complete.
+
+    Args:
+        cfg: goals settings.
+        inputs: the round's candidates, free space and map.
+        outputs: the files to write.
+        person: the photos are a person's (``robot: photos``): six-degree-of-freedom goals in
+            the 3-D free space (:func:`_person_goals`).
 
     Returns:
         The goals.json document.
@@ -51,6 +59,8 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs) -> dict:
         raise FreeSpaceError(
             f"{where}: {inputs.candidates_csv} holds zero candidates; raise score.n_candidates"
         )
+    if person:
+        return _person_goals(cfg, inputs, outputs, cols, where)
     fs = FreeSpace.load(inputs.freespace_npz)
     valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & fs.contains(poses[:, :2])
     any_valid = valid.copy()
@@ -180,3 +190,120 @@ def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs
             f"{100 * doc['seen_free_fraction']:.0f}% of the free space seen)",
         )  # fmt: skip
     return doc
+
+
+COVERAGE_VERTICES = 20000
+"""Mesh vertices (a seeded sample) whose photo counts the coverage picture shows."""
+
+
+def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, cols: dict,
+                  where: str) -> dict:  # fmt: skip
+    """The next shots of a person (``robot: photos``): the score method's choice among the
+    six-degree-of-freedom candidates in the 3-D free space, spaced in 3-D
+    (:func:`~scenebot.goals.select.select_goals_3d`: ``goals.nms_radius_m`` apart, or
+    ``goals.nms_angle_deg`` apart in viewing direction).
+
+    The map is complete only when the free space is not degenerate (enough voxels, a camera
+    in it: :meth:`~scenebot.artifacts.freespace.FreeVolume.degenerate`), some candidate in it
+    could be registered, and the best such view scores below ``goals.complete_threshold_deg``.
+    A folder of photos is one round, so diminishing returns never apply.
+    """
+    from scenebot.artifacts.freespace import FreeVolume
+    from scenebot.goals.select import select_goals_3d
+
+    if cfg.method != "score":
+        raise ValueError(
+            f"{where}: goals.method = {cfg.method} works on a robot's plane; a person's photos "
+            "(robot: photos) take goals.method: score"
+        )
+    vol = FreeVolume.load(inputs.freespace_npz)
+    poses = np.column_stack([cols[c] for c in ("x", "y", "z", "theta", "pitch")])
+    inside = vol.contains(poses[:, :3])
+    valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & inside
+    any_valid = valid.copy()
+    registrable = (cols["seen_fraction"] >= cfg.min_seen_fraction) & (
+        cols["matchable_points"] >= cfg.min_matchable_points
+    )
+    if (valid & registrable).any():
+        valid &= registrable
+    elif valid.any():
+        log.warning("%s: no candidate could be registered (goals.min_seen_fraction, "
+                    "goals.min_matchable_points); goals ignore the overlap", where)  # fmt: skip
+    score = np.where(valid, cols["score_deg"], np.nan)
+    ranked = select_goals_3d(
+        poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
+    )
+    chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
+    scored = any_valid & np.isfinite(cols["score_deg"])
+    smap = read_sparse_map(inputs.sfm_dir) if inputs.sfm_dir is not None else None
+    coverage = _coverage(inputs.mesh_ply, smap)
+    doc = goals_document(
+        poses, score, chosen, cfg.complete_threshold_deg, where,
+        extra={
+            "mode": "person (robot: photos): six degrees of freedom",
+            "n_valid": int(valid.sum()),
+            "n_in_free_space": int(inside.sum()),
+            "min_seen_fraction": cfg.min_seen_fraction,
+            "min_matchable_points": cfg.min_matchable_points,
+            "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
+            "nms_radius_m": cfg.nms_radius_m,
+            "nms_angle_deg": cfg.nms_angle_deg,
+            "mean_score_deg": round(float(np.mean(cols["score_deg"][scored])), 4)
+            if scored.any() else None,
+            "free_volume_m3": round(vol.volume_m3, 6),
+            "free_voxels": vol.n_free,
+            "camera_height": round(vol.camera_height, 4),
+            "map_images": None if smap is None else len(smap.names),
+            "coverage": None if coverage is None else coverage[2],
+        },
+    )  # fmt: skip
+    apply_stopping_rule(doc, None, cfg.complete_threshold_deg)
+    degenerate = vol.degenerate()
+    if degenerate is not None or not valid.any():
+        doc["complete"] = False
+        doc.pop("complete_because", None)
+        doc["not_complete_because"] = (
+            f"the free space is degenerate: {degenerate}" if degenerate is not None else
+            f"no candidate in the free space hits goals.min_hit_fraction = "
+            f"{cfg.min_hit_fraction} of its view on the map"
+        )  # fmt: skip
+    spare = goals_document(poses, score, backups, 0.0, where)["goals"]
+    doc["backups"] = [{**g, "rank": g["rank"] + len(chosen)} for g in spare]
+    write_goals(outputs.goals_json, doc)
+    if outputs.goals_png is not None and smap is not None:
+        from scenebot.geometry import read_map_geometry
+        from scenebot.goals.plots import plot_person_goals
+
+        fwd = smap.R[:, 2]  # each photo's optical axis
+        taken = np.column_stack([smap.centres, np.arctan2(fwd[:, 1], fwd[:, 0]),
+                                 np.arcsin(np.clip(fwd[:, 2], -1, 1))])  # fmt: skip
+        surface, seen_by = (coverage[0], coverage[1]) if coverage is not None else (
+            read_map_geometry(inputs.sfm_dir)[0], None)  # fmt: skip
+        if seen_by is None:
+            seen_by = np.full(len(surface), 2)
+        plot_person_goals(
+            outputs.goals_png, vol, taken, smap.intrinsics[0], poses[chosen],
+            cols["score_deg"][chosen], surface, seen_by,
+            f"{where}: the next {len(chosen)} shots (complete={doc['complete']}); predicted "
+            "gain = view score (deg, the rendering error a photo there removes)",
+        )  # fmt: skip
+    return doc
+
+
+def _coverage(mesh_ply: Path | None, smap) -> tuple[np.ndarray, np.ndarray, dict] | None:
+    """Photos seeing the map's surface (a sample of mesh vertices) and its summary; None
+    without the mesh or the map."""
+    if mesh_ply is None or smap is None or not Path(mesh_ply).is_file():
+        return None
+    from scenebot.artifacts.mesh import read_mesh
+    from scenebot.goals.coverage import photo_counts
+
+    V, F = read_mesh(mesh_ply)
+    pts, seen_by = photo_counts(V, F, smap, COVERAGE_VERTICES, np.random.default_rng(0))
+    summary = {
+        "vertices_sampled": len(pts),
+        "seen_by_fewer_than_2": round(float(np.mean(seen_by < 2)), 4) if len(pts) else None,
+        "seen_by_none": round(float(np.mean(seen_by == 0)), 4) if len(pts) else None,
+        "median_photos": float(np.median(seen_by)) if len(pts) else None,
+    }
+    return pts, seen_by, summary

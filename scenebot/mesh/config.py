@@ -7,6 +7,40 @@ from pydantic import Field
 from scenebot.settings import Settings
 
 
+class VolumeConfig(Settings):
+    """The 3-D free space of a person's photos (``robot: photos``; ``mesh.volume``): the space
+    the photos saw through is empty (:mod:`scenebot.mesh.volume`)."""
+
+    voxel_m: float = Field(
+        0.05, gt=0.0, description="Voxel edge of the free-space grid (m, map units)."
+    )
+    max_voxels: int = Field(
+        4_000_000,
+        ge=1000,
+        description="The grid over the cameras and points holds at most this many voxels "
+        "(count): a larger scene gets larger voxels (logged and written to freespace.json).",
+    )
+    min_rays: int = Field(
+        2,
+        ge=1,
+        description="A voxel is free when at least this many lines of sight (camera to an "
+        "observed 3D point of the map) cross it (count): one stray ray (a wrong match) frees "
+        "nothing.",
+    )
+    clearance_m: float = Field(
+        0.1,
+        ge=0.0,
+        description="Voxels whose centre is this close (m) to a 3D point of the map or a mesh "
+        "vertex are not free: a camera held there would touch the surface.",
+    )
+    min_voxels: int = Field(
+        200,
+        ge=1,
+        description="A free space of fewer voxels is degenerate, an error (count): too few "
+        "lines of sight to know where a person can stand.",
+    )
+
+
 class MeshConfig(Settings):
     """Poisson mesh of the sparse map and the free space cut from it (``mesh`` stage)."""
 
@@ -59,4 +93,9 @@ class MeshConfig(Settings):
     )
     grid_resolution_m: float = Field(
         0.02, gt=0.0, description="Cell size of the free-space raster (m)."
+    )
+    volume: VolumeConfig = Field(
+        default_factory=VolumeConfig,
+        description="robot: photos: the 3-D free space the photos saw through (in place of "
+        "the robot's cut at the camera plane).",
     )

@@ -2,11 +2,46 @@
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from scenebot.settings import Settings
+
+
+class PersonConfig(Settings):
+    """Candidates of a person's camera (``robot: photos``; ``score.person``): six degrees of
+    freedom in the 3-D free space, at the heights and tilts a person holds a camera."""
+
+    heights_m: list[float] = Field(
+        default_factory=lambda: [-0.6, 0.4],
+        min_length=2,
+        max_length=2,
+        description="Lowest and highest camera height (m, map units) relative to the photos' "
+        "median camera height: crouching to arms raised.",
+    )
+    pitch_deg: list[float] = Field(
+        default_factory=lambda: [-45.0, 45.0],
+        min_length=2,
+        max_length=2,
+        description="Lowest and highest camera tilt (degrees, up positive, each inside "
+        "(-90, 90)); yaw is free, roll 0.",
+    )
+
+    @field_validator("heights_m")
+    @classmethod
+    def _heights(cls, v: list[float]) -> list[float]:
+        if not all(math.isfinite(h) for h in v) or v[0] > v[1]:
+            raise ValueError(f"{v}: two finite heights, lowest first, e.g. [-0.6, 0.4]")
+        return v
+
+    @field_validator("pitch_deg")
+    @classmethod
+    def _pitch(cls, v: list[float]) -> list[float]:
+        if not (-90.0 < v[0] <= v[1] < 90.0):
+            raise ValueError(f"{v}: lowest first, both inside (-90, 90), e.g. [-45, 45]")
+        return v
 
 
 class ScoreConfig(Settings):
@@ -54,3 +89,7 @@ class ScoreConfig(Settings):
         "cameras' mean distance to it (SIFT's scale range).",
     )
     plot_top: int = Field(4, ge=0, description="Top candidates drawn as per-pixel score images.")
+    person: PersonConfig = Field(
+        default_factory=PersonConfig,
+        description="robot: photos: candidates of a person's camera (6 degrees of freedom).",
+    )

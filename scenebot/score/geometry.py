@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenebot.geometry import Intrinsics, planar_cam_from_world
+from scenebot.geometry import Intrinsics, planar_cam_from_world, tilted_cam_from_world
 
 VIEW_COLS = 19
 
@@ -52,4 +52,19 @@ def candidate_views(poses: np.ndarray, intr: Intrinsics) -> np.ndarray:
     """
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     Rt = planar_cam_from_world(poses[:, 0], poses[:, 1], poses[:, 2])
+    return pack_views(Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:], intr)
+
+
+def person_views(poses: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Packed views of a person's candidate poses (six degrees of freedom, roll 0).
+
+    Args:
+        poses: (N, 5) candidate poses (x, y, z m, theta rad, pitch rad up positive).
+        intr: virtual camera intrinsics.
+
+    Returns:
+        (N, 19) float64 packed views.
+    """
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 5)
+    Rt = tilted_cam_from_world(p[:, :3], p[:, 3], p[:, 4])
     return pack_views(Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:], intr)

@@ -11,12 +11,12 @@ import numpy as np
 
 from scenebot.artifacts import round_name
 from scenebot.artifacts.candidates import write_candidates
-from scenebot.artifacts.freespace import FreeSpace
+from scenebot.artifacts.freespace import FreeSpace, FreeVolume
 from scenebot.artifacts.mesh import MeshError, check_mesh, decimate, read_mesh
 from scenebot.geometry import read_sparse_map
-from scenebot.score.candidates import sample_candidates
+from scenebot.score.candidates import sample_candidates, sample_person_candidates
 from scenebot.score.config import ScoreConfig
-from scenebot.score.geometry import candidate_views
+from scenebot.score.geometry import candidate_views, person_views
 from scenebot.score.matchable import matchable_points
 
 log = logging.getLogger(__name__)
@@ -62,8 +62,15 @@ def make_scorer(cfg: ScoreConfig, V: np.ndarray, F: np.ndarray, smap, where: str
     )
 
 
-def run(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> dict:
+def run(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs, person: bool = False) -> dict:
     """Sample candidates in free space and score them.
+
+    Args:
+        cfg: score settings.
+        inputs: the round's map, mesh and free space.
+        outputs: the files to write.
+        person: the photos are a person's (``robot: photos``): candidates in six degrees of
+            freedom in the 3-D free space (``score.person``), not a robot's in the plane.
 
     Returns:
         Summary: candidate count, evaluation rate (candidates/s), taichi arch, triangles.
@@ -72,10 +79,20 @@ def run(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs) -> dict:
     smap = read_sparse_map(inputs.sfm_dir)
     V, F = read_mesh(inputs.mesh_ply)
     check_mesh(V, F, f"{where} {inputs.mesh_ply}")
-    fs = FreeSpace.load(inputs.freespace_npz)
-    poses = sample_candidates(fs, cfg.n_candidates, np.random.default_rng(cfg.seed), where)
-    scorer = make_scorer(cfg, V, F, smap, where)
-    views = candidate_views(poses, scorer.intr)
+    rng = np.random.default_rng(cfg.seed)
+    if person:
+        scorer = make_scorer(cfg, V, F, smap, where)
+        vol = FreeVolume.load(inputs.freespace_npz)
+        Vd, Fd = decimate(V, F, cfg.max_triangles)
+        poses = sample_person_candidates(
+            vol, Vd, Fd, cfg.n_candidates, cfg.person, scorer.intr, rng, where
+        )
+        views = person_views(poses, scorer.intr)
+    else:
+        fs = FreeSpace.load(inputs.freespace_npz)
+        poses = sample_candidates(fs, cfg.n_candidates, rng, where)
+        scorer = make_scorer(cfg, V, F, smap, where)
+        views = candidate_views(poses, scorer.intr)
     t0 = time.perf_counter()
     res = scorer.score_views(views)
     dt = time.perf_counter() - t0

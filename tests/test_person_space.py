@@ -1,0 +1,276 @@
+"""A person's photos (``robot: photos``): the 3-D free space the photos saw through, candidates
+in six degrees of freedom, goals and the "complete" verdict, against synthetic scenes of known
+geometry (an object with cameras around it, a box room photographed facing one way)."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
+
+from scenebot.artifacts.candidates import read_candidates, write_candidates
+from scenebot.artifacts.freespace import FreeSpace, FreeSpaceError, FreeVolume
+from scenebot.geometry import Intrinsics, look_rotation, tilted_cam_from_world
+from scenebot.goals.config import GoalsConfig
+from scenebot.goals.select import view_directions
+from scenebot.goals.stage import GoalsInputs, GoalsOutputs
+from scenebot.goals.stage import run as run_goals
+from scenebot.mesh.config import MeshConfig
+from scenebot.mesh.stage import MeshInputs, MeshOutputs
+from scenebot.mesh.stage import run as run_mesh
+from scenebot.score.config import PersonConfig, ScoreConfig
+from scenebot.score.geometry import candidate_views, person_views
+from scenebot.score.stage import ScoreInputs, ScoreOutputs
+from scenebot.score.stage import run as run_score
+from scenebot.testing import score as syn
+
+OBJECT = (np.array([-0.3, -0.2, -0.5]), np.array([0.3, 0.2, 0.3]))  # the object's box (m)
+ROOM = {"size": (6.0, 4.0), "floor_z": -1.5, "ceil_z": 1.0}  # a room at a person's heights
+TABLE = (np.array([1.2, 0.6, -1.5]), np.array([2.2, 1.4, 0.45]))  # syn.room's furniture
+CABINET = (np.array([-2.6, -1.9, -1.5]), np.array([-1.9, -1.3, 1.6]))
+
+
+def look_at(centres: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cam_from_world R (S, 3, 3), t (S, 3) of cameras at ``centres`` looking at ``targets``."""
+    R = []
+    for c, g in zip(centres, targets, strict=True):
+        d = g - c
+        R.append(look_rotation(np.arctan2(d[1], d[0]), np.arctan2(d[2], np.hypot(d[0], d[1]))))
+    R = np.array(R)
+    return R, -np.einsum("nij,nj->ni", R, centres)
+
+
+def mapped(root, V, F, centres, targets, n_points, rng, cfg=None):
+    """A synthetic COLMAP map of a scene photographed from ``centres`` and the person's mesh
+    stage on it."""
+    R, t = look_at(centres, targets)
+    K = syn.default_intrinsics()
+    pts, _ = syn.sample_surface(V, F, n_points, rng)
+    syn.write_colmap_model(root / "sfm", K, R, t, pts, syn.visible_mask(V, F, R, t, K, pts), rng)
+    out = MeshOutputs(
+        root / "mesh.ply", root / "freespace.json", root / "freespace.npz", root / "freespace.png"
+    )
+    summary = run_mesh(cfg or MeshConfig(), MeshInputs(root / "sfm"), out, person=True)
+    return out, summary
+
+
+def inside(c: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    return np.all((c > box[0]) & (c < box[1]), axis=1)
+
+
+def object_ring(rng) -> tuple[np.ndarray, np.ndarray]:
+    """16 photos on a ring of 2 m around the object, at three heights, aimed near its centre."""
+    a = np.arange(16) * 2 * np.pi / 16
+    centres = np.stack([2.0 * np.cos(a), 2.0 * np.sin(a), np.tile([-0.2, 0.0, 0.2, 0.0], 4)], 1)
+    return centres, np.array([0.0, 0.0, -0.1]) + rng.normal(0, 0.05, (16, 3))
+
+
+@pytest.fixture(scope="module")
+def object_map(tmp_path_factory):
+    rng = np.random.default_rng(3)
+    V, F = syn.box_mesh(*OBJECT, 0.1)
+    centres, targets = object_ring(rng)
+    root = tmp_path_factory.mktemp("object") / "temple" / "round_000"
+    out, summary = mapped(root, V, F, centres, targets, 4000, rng)
+    return {"out": out, "summary": summary, "centres": centres, "V": V, "F": F}
+
+
+@pytest.fixture(scope="module")
+def room_map(tmp_path_factory):
+    """A box room photographed from five places, every photo facing west (the east walls are
+    never photographed), at heights -0.3 .. 0.3 m and tilts -20 .. 20 degrees; scored and
+    with goals."""
+    rng = np.random.default_rng(4)
+    V, F = syn.room(cell_m=0.5, **ROOM)
+    centres, targets = [], []
+    for k, (x, y) in enumerate([[-1.5, -0.5], [0.0, 0.5], [1.2, -1.0], [-0.5, -1.2], [0.5, 1.2]]):
+        for j, h in enumerate(np.deg2rad(np.arange(120, 241, 15))):
+            z, p = [-0.3, 0.0, 0.3][j % 3], np.deg2rad([-20, 0, 20][(j + k) % 3])
+            centres.append([x, y, z])
+            targets.append([x + np.cos(h) * np.cos(p), y + np.sin(h) * np.cos(p), z + np.sin(p)])
+    root = tmp_path_factory.mktemp("room") / "home" / "round_000"
+    out, summary = mapped(root, V, F, np.array(centres), np.array(targets), 12000, rng)
+    so = ScoreOutputs(root / "candidates.csv", root / "score_views.png")
+    score_cfg = ScoreConfig(n_candidates=300, width=40, height=30, plot_top=1, backend="cpu")
+    run_score(score_cfg, ScoreInputs(root / "sfm", out.mesh_ply, out.freespace_npz), so,
+              person=True)  # fmt: skip
+    go = GoalsOutputs(root / "goals.json", root / "goals.png")
+    gcfg = GoalsConfig(k=4, min_matchable_points=0)
+    gi = GoalsInputs(so.candidates_csv, out.freespace_npz, root / "sfm", mesh_ply=out.mesh_ply)
+    doc = run_goals(gcfg, gi, go, person=True)
+    return {"root": root, "out": out, "summary": summary, "so": so, "go": go, "doc": doc,
+            "gcfg": gcfg, "score_cfg": score_cfg, "centres": np.array(centres)}  # fmt: skip
+
+
+def test_free_space_of_an_object_is_around_it_never_in_it(object_map):
+    vol = FreeVolume.load(object_map["out"].freespace_npz)
+    c = vol.centres(*np.nonzero(vol.free))
+    assert not inside(c, OBJECT).any()
+    # nor within the clearance of its surface (half a voxel diagonal of slack)
+    grown = (
+        OBJECT[0] - vol.clearance + 0.87 * vol.voxel,
+        OBJECT[1] + vol.clearance - 0.87 * vol.voxel,
+    )
+    assert not inside(c, grown).any()
+    # the space between each camera and the object was seen through: free
+    mid = 0.5 * vol.cameras * np.array([1, 1, 0]) + np.array([0, 0, -0.05])
+    assert vol.contains(mid).mean() > 0.9
+    assert vol.contains(vol.cameras).mean() > 0.9
+    # and space no photo looked through (beyond the object, below the ring) is not
+    assert not vol.contains(np.array([[0.0, 0.0, -1.2], [3.0, 3.0, 0.0], [0.0, 0.0, 1.2]])).any()
+    doc = json.loads(object_map["out"].freespace_json.read_text())
+    assert doc["volume"]["free_voxels"] == vol.n_free and doc["volume"]["degenerate"] is None
+    assert object_map["out"].freespace_png.stat().st_size > 10_000
+    # the 2-D free space (at the median camera height) still opens for the plane's readers
+    fs = FreeSpace.load(object_map["out"].freespace_npz)
+    assert fs.mask.any() and not fs.contains(np.array([[0.0, 0.0]]))[0]
+
+
+def test_free_space_of_a_room_stays_inside_it(room_map):
+    vol = FreeVolume.load(room_map["out"].freespace_npz)
+    c = vol.centres(*np.nonzero(vol.free))
+    sx, sy = ROOM["size"]
+    in_room = (np.abs(c[:, 0]) < sx / 2) & (np.abs(c[:, 1]) < sy / 2)
+    in_room &= (c[:, 2] > ROOM["floor_z"]) & (c[:, 2] < ROOM["ceil_z"])
+    assert in_room.all()
+    assert not inside(c, TABLE).any() and not inside(c, CABINET).any()
+    assert vol.contains(room_map["centres"]).all()
+    # the photos looked west: most of the west half is free, the east wall's side is not
+    room = sx * sy * (ROOM["ceil_z"] - ROOM["floor_z"])
+    assert 0.25 * room < vol.volume_m3 < 0.75 * room
+    assert (c[:, 0] < 0).mean() > 0.6
+
+
+def test_too_little_free_space_is_an_error_naming_the_setting(tmp_path):
+    rng = np.random.default_rng(5)
+    V, F = syn.box_mesh(*OBJECT, 0.1)
+    centres, targets = object_ring(rng)
+    cfg = MeshConfig(volume={"min_voxels": 10_000_000})
+    with pytest.raises(FreeSpaceError, match=r"round_000.*mesh\.volume\.min_voxels"):
+        mapped(tmp_path / "round_000", V, F, centres, targets, 4000, rng, cfg)
+
+
+def test_person_candidates_are_in_free_space_at_a_persons_heights_and_tilts(room_map):
+    cols = read_candidates(room_map["so"].candidates_csv)
+    vol = FreeVolume.load(room_map["out"].freespace_npz)
+    xyz = np.column_stack([cols["x"], cols["y"], cols["z"]])
+    assert len(xyz) == 300
+    # candidates.csv rounds to 6 significant digits: a point on a voxel face may round out
+    assert vol.contains(xyz).mean() > 0.98
+    person = room_map["score_cfg"].person
+    h = cols["z"] - vol.camera_height
+    assert h.min() >= person.heights_m[0] - 1e-4 and h.max() <= person.heights_m[1] + 1e-4
+    assert np.ptp(h) > 0.6  # the whole band is used
+    pitch = np.degrees(cols["pitch"])
+    assert pitch.min() >= person.pitch_deg[0] - 1e-3 and pitch.max() <= person.pitch_deg[1] + 1e-3
+    assert (pitch > 10).any() and (pitch < -10).any()
+    # they look at the map: the views hit the mesh
+    assert np.median(cols["hit_fraction"]) > 0.8
+    # facing the never-photographed east scores worse than facing the photographed west
+    d = view_directions(cols["theta"], cols["pitch"])
+    s = cols["score_deg"]
+    assert np.nanmean(s[d[:, 0] > 0.5]) > np.nanmean(s[d[:, 0] < -0.5]) + 30
+
+
+def test_person_goals_face_the_unphotographed_and_are_not_complete(room_map):
+    doc = json.loads(room_map["go"].goals_json.read_text())
+    assert doc == room_map["doc"]
+    assert not doc["complete"] and 1 <= len(doc["goals"]) <= 4
+    g = np.array([[x[k] for k in ("x", "y", "z", "theta", "pitch")] for x in doc["goals"]])
+    vol = FreeVolume.load(room_map["out"].freespace_npz)
+    assert vol.contains(g[:, :3]).all()
+    d = view_directions(g[:, 3], g[:, 4])
+    assert (d[:, 0] > 0).all()  # towards the east
+    cfg = room_map["gcfg"]
+    for a in range(len(g)):
+        for b in range(a):
+            far = np.linalg.norm(g[a, :3] - g[b, :3]) >= cfg.nms_radius_m
+            assert far or d[a] @ d[b] < np.cos(np.deg2rad(cfg.nms_angle_deg))
+    assert doc["free_volume_m3"] > 1 and doc["coverage"]["vertices_sampled"] > 1000
+    assert room_map["go"].goals_png.stat().st_size > 20_000
+
+
+def _rewrite(src, dst, **cols):
+    """A copy of candidates.csv with some columns replaced."""
+    c = read_candidates(src)
+    c.update(cols)
+    poses = np.column_stack([c[k] for k in ("x", "y", "z", "theta", "pitch")])
+    write_candidates(dst, poses, c)
+
+
+def test_complete_only_with_a_free_space_that_is_not_degenerate(room_map, tmp_path):
+    """Every candidate predicted to render well says complete, in a real free space; the same
+    candidates in a degenerate free space (fewer voxels than mesh.volume.min_voxels) do not."""
+    root = tmp_path / "round_000"
+    root.mkdir()
+    src = room_map["so"].candidates_csv
+    n = len(read_candidates(src)["x"])
+    good = {"score_deg": np.full(n, 3.0), "hit_fraction": np.ones(n), "seen_fraction": np.ones(n)}
+    _rewrite(src, root / "candidates.csv", **good)
+    cfg = GoalsConfig(min_matchable_points=0)
+    npz = room_map["out"].freespace_npz
+    doc = run_goals(cfg, GoalsInputs(root / "candidates.csv", npz), GoalsOutputs(root / "g.json"),
+                    person=True)  # fmt: skip
+    assert doc["complete"] and "complete_because" in doc
+    # the same free space cut down to a few voxels around the candidates
+    vol = FreeVolume.load(npz)
+    c = read_candidates(root / "candidates.csv")
+    k, j, i, _ = vol.voxel_of(np.column_stack([c["x"], c["y"], c["z"]])[:5])
+    few = np.zeros_like(vol.free)
+    few[k, j, i] = True
+    small = FreeVolume(few, vol.rays, vol.origin, vol.voxel, vol.clearance, vol.cameras,
+                       vol.min_voxels)  # fmt: skip
+    FreeSpace.load(npz).save(root / "fs.json", root / "fs.npz", "round_000", volume=small)
+    doc = run_goals(cfg, GoalsInputs(root / "candidates.csv", root / "fs.npz"),
+                    GoalsOutputs(root / "g2.json"), person=True)  # fmt: skip
+    assert not doc["complete"] and "mesh.volume.min_voxels" in doc["not_complete_because"]
+    assert doc["goals"]  # still advice
+
+
+def test_a_robots_free_space_is_no_persons(room_map, tmp_path):
+    fs = FreeSpace.load(room_map["out"].freespace_npz)
+    fs.save(tmp_path / "fs.json", tmp_path / "fs.npz", "round_000")  # a robot's file
+    with pytest.raises(FreeSpaceError, match="robot: photos"):
+        FreeVolume.load(tmp_path / "fs.npz")
+
+
+def test_robot_rows_have_z_0_and_pitch_0_and_the_old_header_still_reads(tmp_path):
+    rng = np.random.default_rng(0)
+    poses = np.column_stack([rng.uniform(-2, 2, (20, 2)), rng.uniform(-np.pi, np.pi, 20)])
+    cols = {c: rng.random(20) for c in ("score_deg", "hit_fraction", "seen_fraction")}
+    cols["matchable_points"] = rng.integers(0, 500, 20).astype(float)
+    write_candidates(tmp_path / "c.csv", poses, cols)
+    new = read_candidates(tmp_path / "c.csv")
+    assert (tmp_path / "c.csv").read_text().splitlines()[0].startswith("x,y,z,theta,pitch,")
+    assert np.all(new["z"] == 0) and np.all(new["pitch"] == 0)
+    np.testing.assert_allclose(new["theta"], poses[:, 2], atol=1e-5)
+    old = "x,y,theta,score_deg,hit_fraction,seen_fraction,matchable_points\n1,2,0.5,9,1,1,40\n"
+    (tmp_path / "old.csv").write_text(old)
+    back = read_candidates(tmp_path / "old.csv")
+    assert back["theta"][0] == 0.5 and back["z"][0] == 0 and back["matchable_points"][0] == 40
+    # the robot's planar views are the person's views at z = 0, pitch = 0
+    intr = Intrinsics.from_hfov(80, 60, 60.0)
+    six = np.column_stack([poses[:, :2], np.zeros(20), poses[:, 2], np.zeros(20)])
+    np.testing.assert_allclose(person_views(six, intr), candidate_views(poses, intr), atol=1e-12)
+
+
+def test_tilted_cameras_have_no_roll_and_look_where_they_say():
+    rng = np.random.default_rng(1)
+    n = 50
+    xyz, th, pi = rng.normal(size=(n, 3)), rng.uniform(-np.pi, np.pi, n), rng.uniform(-1.2, 1.2, n)
+    Rt = tilted_cam_from_world(xyz, th, pi)
+    R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]
+    np.testing.assert_allclose(R[:, 0, 2], 0, atol=1e-12)  # the image's x axis is level
+    np.testing.assert_allclose(R[:, 2], view_directions(th, pi), atol=1e-12)
+    np.testing.assert_allclose(-np.einsum("nji,nj->ni", R, t), xyz, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nij,nkj->nik", R, R), np.broadcast_to(np.eye(3), R.shape),
+                               atol=1e-12)  # fmt: skip
+
+
+def test_person_settings_name_a_wrong_range():
+    with pytest.raises(ValueError, match="pitch_deg"):
+        PersonConfig(pitch_deg=[10, -10])
+    with pytest.raises(ValueError, match="heights_m"):
+        PersonConfig(heights_m=[0.5, -0.5])
