@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import Field
 
 from scenebot.settings import Settings
@@ -13,6 +15,21 @@ class KnownDistance(Settings):
     image_a: str = Field(description="File name of the first photo (as in the photo folder).")
     image_b: str = Field(description="File name of the second photo.")
     distance_m: float = Field(gt=0.0, description="Distance between their camera centres (m).")
+
+
+class UpPhoto(Settings):
+    """The side of one photo that points up (bring-your-own photos): overrides the up
+    direction estimated from the photos."""
+
+    image: str = Field(description="File name of the photo (as in the photo folder).")
+    side: Literal["top", "bottom", "left", "right"] = Field(
+        "top",
+        description=(
+            "The side of that photo that points up: top for a photo held upright, left or "
+            "right for one turned 90 degrees, bottom for one upside down. The frame tilts "
+            "with that photo's own tilt (pick one taken level)."
+        ),
+    )
 
 
 class SfmConfig(Settings):
@@ -108,6 +125,23 @@ class SfmConfig(Settings):
             "runs; the largest model wins. Incremental mapping picks its initial pair and "
             "RANSAC samples at random, and on weakly overlapping sets a run can split the "
             "model where the next one does not."
+        ),
+    )
+    global_sfm_fallback: Literal["photos", "always", "never"] = Field(
+        "photos",
+        description=(
+            "Mapping from scratch: when the incremental mapper leaves out photos that "
+            "verified pairs connect to its model, global SfM (pycolmap's GLOMAP: rotation "
+            "averaging and global positioning over every verified pair) maps the set too, "
+            "and the model that registers more photos is kept (report.json global_sfm). The "
+            "incremental mapper registers a photo only when it sees >= 30 points already "
+            "triangulated by two registered photos; across a wide gap between views too few "
+            "features are seen three times (temple ring: 3 of 16 photos saw 5-21 and formed "
+            "a 4-photo model that COLMAP discards; global SfM registered 16). `photos`: only "
+            "for a photo folder (robot: photos). The robot's circles of photos turned in "
+            "place are near-pure rotations, which global positioning does not handle: on the "
+            "canned office set it registered 45 of 45 photos against 42 with the metric "
+            "scale 103 % off. `always`, `never`: for every photo set, or none."
         ),
     )
     global_ba_ratio: float = Field(
@@ -314,6 +348,16 @@ class SfmConfig(Settings):
         description=(
             "Bring-your-own photos: a measured distance between two camera centres sets the "
             "metric scale (otherwise scale 1, arbitrary units)."
+        ),
+    )
+    up_photo: UpPhoto | None = Field(
+        None,
+        description=(
+            "Bring-your-own photos: up is this side of this photo, instead of the up "
+            "estimated from the photos (the direction most perpendicular to the optical axes "
+            "and the camera offsets, signed by the image-up vectors when informative, else "
+            "so that the cameras look down; report.json alignment.stats.up). Set it when "
+            "map.png shows the map tilted or upside down."
         ),
     )
 

@@ -1,4 +1,5 @@
-"""Incremental mapping (pycolmap), from scratch or continuing a previous round's model."""
+"""Incremental mapping (pycolmap), from scratch or continuing a previous round's model;
+global SfM when the incremental mapper leaves out photos the view graph connects."""
 
 from __future__ import annotations
 
@@ -39,6 +40,10 @@ class MappingResult:
         attempts: mapping runs from scratch (``cfg.mapping_attempts`` at most; 0 when
             continuing from the previous model sufficed).
         new_ids: ``registered`` modes: image ids of the photos registered now.
+        mapper: ``"incremental"`` or ``"global"`` (global SfM kept, see
+            :func:`global_sfm_fallback`).
+        global_sfm: the global-SfM fallback's decision (report.json ``global_sfm``): why
+            it ran, both models' photo counts, which was kept; empty when it did not run.
     """
 
     reconstruction: pycolmap.Reconstruction
@@ -49,6 +54,8 @@ class MappingResult:
     refinement: dict = field(default_factory=dict)
     attempts: int = 0
     new_ids: list[int] = field(default_factory=list)
+    mapper: str = "incremental"
+    global_sfm: dict = field(default_factory=dict)
 
     @property
     def continued(self) -> bool:
@@ -343,6 +350,126 @@ def _scratch(
     return best, attempt + 1
 
 
+def verified_pairs(db_path: Path, min_num_matches: int) -> dict[str, set[str]]:
+    """The view graph: photo name -> names of the photos it shares a geometrically verified
+    pair of at least ``min_num_matches`` inlier matches with."""
+    graph: dict[str, set[str]] = {}
+    with open_database(db_path) as db:
+        names = {im.image_id: im.name for im in db.read_all_images()}
+        pair_ids, inliers = db.read_two_view_geometry_num_inliers()
+    for pid, n in zip(pair_ids, inliers, strict=True):
+        if n >= min_num_matches:
+            a, b = (names[i] for i in pycolmap.pair_id_to_image_pair(pid))
+            graph.setdefault(a, set()).add(b)
+            graph.setdefault(b, set()).add(a)
+    return graph
+
+
+def connected_left_out(graph: dict[str, set[str]], names: list[str], kept: set[str]) -> list[str]:
+    """The photos of ``names`` outside ``kept`` that a chain of verified pairs (within
+    ``names``) connects to a photo of ``kept``, in the order of ``names``."""
+    allowed = set(names)
+    reached, todo = set(kept), list(kept)
+    while todo:
+        for other in graph.get(todo.pop(), ()):
+            if other in allowed and other not in reached:
+                reached.add(other)
+                todo.append(other)
+    return [n for n in names if n in reached and n not in kept]
+
+
+def _global_options(cfg: SfmConfig, names: list[str], fix_focal: bool):
+    """pycolmap's global SfM options from the settings (CPU, seeded, our intrinsics
+    policy: principal point fixed, focal refined unless held at EXIF)."""
+    opts = pycolmap.GlobalPipelineOptions()
+    opts.num_threads = cfg.num_threads
+    opts.random_seed = cfg.random_seed
+    opts.min_num_matches = cfg.min_num_matches
+    opts.image_names = list(names)
+    opts.mapper.num_threads = cfg.num_threads
+    opts.mapper.random_seed = cfg.random_seed
+    opts.mapper.global_positioning.use_gpu = False
+    ba = opts.mapper.bundle_adjustment
+    ba.ceres.use_gpu = False
+    ba.refine_focal_length = not fix_focal
+    ba.refine_principal_point = False
+    ba.refine_extra_params = cfg.refine_distortion
+    return opts
+
+
+def global_sfm_fallback(
+    db_path: Path,
+    image_root: Path,
+    work: Path,
+    cfg: SfmConfig,
+    names: list[str],
+    models: dict[int, pycolmap.Reconstruction],
+    fix_focal: bool,
+) -> tuple[dict[int, pycolmap.Reconstruction], str, dict]:
+    """Global SfM when incremental mapping from scratch left out connected photos (the
+    caller checks ``cfg.global_sfm_fallback``).
+
+    The incremental mapper registers a photo from 2D-3D matches to points that two
+    registered photos already triangulated (at least ``abs_pose_min_num_inliers`` = 30);
+    a photo whose verified pairs lead only to features no third registered photo sees (a
+    wide gap between views) is never tried, and a few such photos form a small model that
+    COLMAP discards (``min_model_size``). Global SfM estimates every photo's rotation and
+    position from the verified pairs directly, so any photo the view graph connects can be
+    registered. Its model is kept when it registers more photos than the incremental one.
+
+    Args:
+        db_path, image_root, work, cfg, names, fix_focal: as :func:`map_photos`.
+        models: the incremental mapper's models.
+
+    Returns:
+        The models kept, the mapper that made them (``incremental`` or ``global``), and
+        the decision (empty when the fallback did not run): ``left_out`` (the connected
+        photos the incremental model lacks), ``incremental_registered``,
+        ``global_registered``, ``kept``, ``seconds``.
+    """
+    n_inc = _largest(models)
+    best = max(models.values(), key=lambda r: r.num_reg_images(), default=None)
+    kept = set() if best is None else {best.image(i).name for i in best.reg_image_ids()}
+    if not kept:
+        return models, "incremental", {}
+    left = connected_left_out(verified_pairs(db_path, cfg.min_num_matches), names, kept)
+    if not left:
+        return models, "incremental", {}
+    t = time.perf_counter()
+    out = work / "global"
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    try:
+        glob = pycolmap.global_mapping(
+            str(db_path), str(image_root), str(out), _global_options(cfg, names, fix_focal)
+        )
+    except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
+        log.warning("global SfM failed (%s): keeping the incremental model", exc)
+        glob = {}
+    n_glob = _largest(glob)
+    kept_mapper = "global" if n_glob > n_inc else "incremental"
+    decision = {
+        "left_out": left,
+        "incremental_registered": n_inc,
+        "global_registered": n_glob,
+        "kept": kept_mapper,
+        "seconds": time.perf_counter() - t,
+    }
+    log.warning(
+        "incremental mapping left out %d photo(s) that verified pairs connect to its model "
+        "(%s): global SfM registered %d of %d photos against %d; keeping the %s model "
+        "(sfm.global_sfm_fallback)",
+        len(left),
+        ", ".join(left[:10]) + (" ..." if len(left) > 10 else ""),
+        n_glob,
+        len(names),
+        n_inc,
+        kept_mapper,
+    )
+    return (glob if kept_mapper == "global" else models), kept_mapper, decision
+
+
 def _reasons(db_path: Path, names: list[str], kept: set[str], others: set[str], cfg) -> dict:
     """Why each photo outside the kept model dropped."""
     dropped: dict[str, str] = {}
@@ -381,13 +508,16 @@ def map_photos(
     cfg: SfmConfig,
     previous: pycolmap.Reconstruction | None = None,
     fix_focal: bool = False,
+    person_photos: bool = False,
 ) -> MappingResult:
     """Map the photos ``names``; keep the largest model.
 
     With ``previous`` (round r-1's model, same database) and ``cfg.incremental``, mapping
     continues from it: the new photos are registered, then bundle adjustment refines all.
     When fewer than ``cfg.min_registered_share`` of the photos register that way, mapping
-    runs again from scratch.
+    runs again from scratch. From scratch, when the incremental model leaves out photos
+    that verified pairs connect to it, global SfM maps the set too and the model with more
+    photos is kept (:func:`global_sfm_fallback`).
 
     Args:
         db_path: the scene database (features and matches of all ``names``).
@@ -398,6 +528,8 @@ def map_photos(
         previous: model to continue from, or ``None``.
         fix_focal: keep every camera's focal length at its database prior (EXIF) in all
             bundle adjustments and pose estimates.
+        person_photos: the photos are a person's photo folder (``robot: photos``), for
+            ``cfg.global_sfm_fallback = "photos"``.
 
     Returns:
         The kept model and the dropped photos with reasons.
@@ -418,6 +550,14 @@ def map_photos(
             "Photos need overlap and texture; first photos without matches: "
             + ", ".join(list(dropped)[:10])
         )
+    mapper, global_sfm = "incremental", {}
+    use_global = cfg.global_sfm_fallback == "always" or (
+        cfg.global_sfm_fallback == "photos" and person_photos
+    )
+    if attempts and use_global:
+        models, mapper, global_sfm = global_sfm_fallback(
+            db_path, image_root, work, cfg, names, models, fix_focal
+        )
     ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
     best = ranked[0]
     kept_previous: frozenset[str] = frozenset()
@@ -428,6 +568,7 @@ def map_photos(
         )
     dropped = dropped_photos(db_path, names, ranked, cfg)
     res = MappingResult(best, mode, len(ranked), dropped, attempts=attempts)
+    res.mapper, res.global_sfm = mapper, global_sfm
     refine_globally(res, db_path, image_root, work, cfg, names, fix_focal, kept_previous)
     res.seconds = time.perf_counter() - t0
     return res

@@ -43,6 +43,7 @@ from scenebot.sfm.mapping import (
     refine_globally,
 )
 from scenebot.sfm.pairs import PairPrior, select_pairs
+from scenebot.sfm.person_frame import person_frame_transform
 from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
 from scenebot.sfm.register import camera_xy, global_refinement_checks, map_new_photos
 
@@ -277,6 +278,8 @@ class _Session:
         root, photos, names: the photo folder, the photo set and its names.
         previous: round r-1's model to continue from, or None.
         fix_focal: focal lengths held at their EXIF value.
+        person: the photos are a person's photo folder (``robot: photos``): the person's
+            frame (:mod:`scenebot.sfm.person_frame`) instead of the robot's.
         timings: seconds per step (report.json ``timings_s``).
     """
 
@@ -288,6 +291,7 @@ class _Session:
     names: list[str]
     previous: pycolmap.Reconstruction | None = None
     fix_focal: bool = False
+    person: bool = False
     timings: dict[str, float] = field(default_factory=dict)
 
 
@@ -332,8 +336,9 @@ def _remap_while_circles_disagree(
         run_cfg = cfg.model_copy(update={"random_seed": seed, "mapping_attempts": 1})
         try:
             m2 = map_photos(
-                s.db_path, s.root, s.names, s.work / f"remap_{k}", run_cfg, fix_focal=s.fix_focal
-            )
+                s.db_path, s.root, s.names, s.work / f"remap_{k}", run_cfg,
+                fix_focal=s.fix_focal, person_photos=s.person,
+            )  # fmt: skip
             a2 = robot_frame_transform(
                 m2.reconstruction, s.photos, known_distance=known, **align_kw
             )
@@ -393,7 +398,9 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         odometry estimates and their relative difference, per-circle fits),
         ``circle_priors`` (photos moved back onto their circle, residuals), accuracy summary,
         ``global_refinement`` (round updates registered into the previous map: the checks,
-        whether and why the whole map was refined).
+        whether and why the whole map was refined), ``mapper`` and ``global_sfm`` (whether
+        global SfM mapped a photo folder, and why), ``warnings`` (a person's photos: scale
+        unknown, up uncertain).
 
     Raises:
         PhotoError: fewer than 3 photos, corrupt or truncated JPEGs (named).
@@ -467,6 +474,7 @@ def _open_session(cfg: SfmConfig, inputs: SfmInputs) -> _Session:
         photos,
         [p.name for p in photos],
         previous=_usable_previous(previous, db_path),
+        person=inputs.photo_folder is not None,
         timings=timings,
     )
 
@@ -533,8 +541,9 @@ def _map(s: _Session) -> MappingResult:
         )
     if mres is None:
         mres = map_photos(
-            s.db_path, s.root, s.names, s.work / "mapping", cfg, s.previous, s.fix_focal
-        )
+            s.db_path, s.root, s.names, s.work / "mapping", cfg, s.previous, s.fix_focal,
+            person_photos=s.person,
+        )  # fmt: skip
     s.timings["map"] = mres.seconds
     return mres
 
@@ -621,11 +630,22 @@ def _align_settings(cfg: SfmConfig, previous: pycolmap.Reconstruction | None) ->
 
 def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, list[dict]]:
     """The robot-frame alignment of the mapped model, mapping again while its circles
-    disagree on the scale (:func:`_remap_while_circles_disagree`; model not yet moved)."""
+    disagree on the scale (:func:`_remap_while_circles_disagree`; model not yet moved); a
+    person's photos get the person's frame (:func:`person_frame_transform`)."""
     t = time.perf_counter()
     kd = s.cfg.known_distance
     align_kw = _align_settings(s.cfg, s.previous)
     known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
+    if s.person:
+        up = s.cfg.up_photo
+        alignment = person_frame_transform(
+            mres.reconstruction,
+            s.photos,
+            known_distance=known,
+            up_photo=(up.image, up.side) if up else None,
+        )
+        s.timings["align"] = time.perf_counter() - t
+        return mres, alignment, []
     alignment = robot_frame_transform(
         mres.reconstruction, s.photos, known_distance=known, **align_kw
     )
@@ -780,6 +800,8 @@ def _report(
         "mean_reprojection_error_px": rec.compute_mean_reprojection_error(),
         "mapping_mode": mres.mode,
         "mapping_attempts": mres.attempts,
+        "mapper": mres.mapper,
+        "global_sfm": mres.global_sfm,
         "refinement": mres.refinement,
         "circle_priors": circle_stats,
         "models": mres.num_models,
@@ -794,6 +816,7 @@ def _report(
         "focal_fixed": s.fix_focal,
         "scale": scale,
         "alignment": alignment.as_dict(),
+        "warnings": alignment.stats.get("warnings", []),
         "timings_s": s.timings,
         "accuracy": _accuracy_summary(acc),
     }
