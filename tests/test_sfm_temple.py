@@ -126,3 +126,35 @@ def test_a_known_distance_makes_the_map_metric(temple):
     ratio = np.linalg.norm(X[i] - X[j], axis=1) / np.linalg.norm(G[i] - G[j], axis=1)
     ok = np.linalg.norm(G[i] - G[j], axis=1) > 0.1  # 0001 and 0011 share a centre
     assert np.median(ratio[ok]) == pytest.approx(1.0, abs=0.01)
+
+
+def test_photos_of_an_unrelated_scene_are_named_and_left_out(tmp_path, caplog):
+    """The temple's 16 photos and 3 photos of the office in one folder: the map is the
+    temple, the office photos are named (log and report) with the reason, and nothing in
+    the folder changes."""
+    import hashlib
+    import logging
+    import shutil
+
+    from scenebot.sfm.config import SfmConfig
+    from scenebot.sfm.stage import SfmInputs, SfmOutputs, run
+
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    for p in sorted(DATA.glob("*.jpg")):
+        shutil.copy(p, folder / p.name)
+    office = sorted((ROOT / "tests/data/canned/round_000/capture/images").glob("*.jpg"))[:3]
+    for p in office:
+        shutil.copy(p, folder / f"office_{p.name}")
+    digest = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in folder.iterdir()}
+    with caplog.at_level(logging.WARNING):
+        rep = run(
+            SfmConfig(),
+            SfmInputs(tmp_path / "db.db", photo_folder=folder),
+            SfmOutputs(tmp_path / "sfm"),
+        )
+    others = {f"office_{p.name}" for p in office}
+    assert rep["photos"] == 19 and rep["registered"] == 16
+    assert set(rep["dropped"]) == others and all(rep["dropped"].values())
+    assert all(name in caplog.text for name in others)
+    assert {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in folder.iterdir()} == digest
