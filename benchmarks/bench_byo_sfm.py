@@ -56,21 +56,12 @@ def temple_dir() -> Path:
 
 
 def read_par(path: Path) -> dict[str, np.ndarray]:
-    """Camera centres (m) of a Middlebury ``*_par.txt``: ``name K(9) R(9) t(3)`` per line,
-    world to camera, so the centre is ``-R^T t``.
+    """Camera centres of a Middlebury ``*_par.txt`` (first line the count, then
+    ``name k11..k33 r11..r33 t1 t2 t3`` per photo, world to camera): photo name -> (3,)
+    centre ``-R^T t`` (metres, the set's frame); read by the evaluation's reader."""
+    from scenebot.evaluate.reference import read_reference_cameras
 
-    Returns:
-        Photo name -> (3,) camera centre.
-    """
-    centres = {}
-    for line in Path(path).read_text().splitlines()[1:]:
-        f = line.split()
-        if len(f) != 22:
-            continue
-        v = np.array(f[1:], float)
-        R, t = v[9:18].reshape(3, 3), v[18:21]
-        centres[f[0]] = -R.T @ t
-    return centres
+    return {name: centre for name, (_, centre) in read_reference_cameras(path).items()}
 
 
 def centre_errors_mm(rec, given: dict[str, np.ndarray]) -> dict[str, float]:

@@ -142,11 +142,13 @@ def cmd_tour(args) -> int:
     from scenebot.tour.stage import TourInputs, TourOutputs, run
 
     cfg = _config(args)
+    photos = cfg.robot == "photos"  # a person's photos: no free space, no metric scale
     inputs = TourInputs(
         Path(args.sparse),
         Path(args.images),
         Path(args.dense),
-        Path(args.freespace) if args.freespace else None,
+        Path(args.freespace) if args.freespace and not photos else None,
+        photos=photos,
     )
     summary = run(cfg.tour, inputs, TourOutputs(Path(args.out)), progress=not args.no_progress)
     summary.pop("config", None)

@@ -62,6 +62,12 @@ def test_outputs(tour):
     s = json.loads((out / "tour_summary.json").read_text())
     assert s["video_codec"] in ("h264", "mp4v")
     assert s["mean_coverage"] > 0.9
+    # black pixels per frame in the summary; none in a closed room the photos saw
+    assert len(s["black_fraction_per_frame"]) == FRAMES
+    assert s["max_black_fraction"] == 0.0 and s["eval"]["mean_black_fraction"] == 0.0
+    assert abs(sum(s["mean_fill_fractions"].values()) - 1) < 1e-6
+    assert (out / "tour_path.png").is_file()
+    assert not s["photos"] and s["length_unit"] == "m"
     assert s["eval"]["n_holdout"] == 4
     assert s["eval"]["mean_psnr_ulr"] > s["eval"]["mean_psnr_nearest"]
 

@@ -113,6 +113,13 @@ class UlrConfig(Settings):
         description="A source sees a point if its depth there is at most this fraction deeper "
         "than the proxy depth in that source (fraction).",
     )
+    see_through_tolerance: float = Field(
+        0.15,
+        gt=0,
+        description="A source that sees a surface more than this fraction deeper than the "
+        "point looks through it: the point is empty space (a guess of the hole filling, e.g. "
+        "beside an object's silhouette) and that source does not colour it (fraction).",
+    )
     epsilon: float = Field(
         1e-3,
         gt=0,
@@ -128,53 +135,90 @@ class UlrConfig(Settings):
     inpaint_px: int = Field(
         0,
         ge=0,
-        description="Fill pixels that no source covers by image inpainting within this radius, "
-        "pixels (0 = leave them black).",
+        description="Fill pixels without any proxy surface (the only ones left black: a "
+        "point no photo sees takes the dense cloud's colour) by image inpainting within this "
+        "radius, pixels (0 = leave them black).",
     )
 
 
 class PathConfig(Settings):
-    """The tour path: a smooth closed spline at camera height through the free space."""
+    """The tour path: a smooth walk through the photos' positions, looking at what they show.
+
+    The robot's photos: the path in the camera plane, a level camera. A person's photos
+    (``robot: photos``): a 3-D path, the camera pitched towards what the photos show, and the
+    lengths (``*_m``) scaled to the scene (``tour.photos_depth_m``)."""
 
     frames: int = Field(300, ge=2, description="Frames of the tour (count).")
     cluster_radius_m: float = Field(
         0.25,
         gt=0,
-        description="Camera positions closer than this are one waypoint of the tour, metres.",
+        description="Camera positions closer than this are one stop of the tour, metres.",
+    )
+    open_gap: float = Field(
+        2.5,
+        gt=1,
+        description="The shortest loop through the stops is opened at its longest leg when "
+        "that leg is longer than this many median legs (a ring of photos with a gap, a walk "
+        "along a facade), so the tour never jumps across the scene (ratio).",
+    )
+    blocked_cost: float = Field(
+        10.0,
+        ge=1,
+        description="A straight leg between two stops that crosses an obstacle (clearance or "
+        "free space) counts this many times its length when ordering the stops (ratio; 1 = "
+        "ignore obstacles).",
     )
     clearance_m: float = Field(
         0.25,
         ge=0,
-        description="Every path point keeps at least this distance from the dense cloud, metres.",
+        description="Every path point keeps at least this distance from the dense cloud: "
+        "horizontally from the points in the camera's height band (robot), in 3-D (a person's "
+        "photos), metres.",
     )
     height_band_m: float = Field(
         0.2,
         gt=0,
-        description="Dense points within this height of the camera plane are obstacles for the "
-        "path (keep it below the camera's height above the floor), metres.",
+        description="Robot: dense points within this height of the camera plane are obstacles "
+        "for the path (keep it below the camera's height above the floor), metres.",
     )
     obstacle_min_points: int = Field(
         20,
         ge=1,
-        description="Dense points within clearance_m (in the camera's height band) that make "
-        "an obstacle; fewer are floaters of the fusion (count).",
+        description="Dense points within the clearance that make an obstacle; fewer are "
+        "floaters of the fusion (count).",
     )
     smoothing: float = Field(
         0.0,
         ge=0,
-        description="Spline smoothing factor (scipy splprep s, m^2); 0 interpolates the waypoints.",
+        description="The spline may pass up to about this many median legs (RMS) from the "
+        "stops, so that it turns more gently (fraction; 0 = through every stop).",
     )
-    look_ahead_m: float = Field(
-        0.6,
+    look_bandwidth: float = Field(
+        0.5,
         gt=0,
-        description="The camera looks along the path towards the point this far ahead, metres.",
+        description="A path point looks at the mean target of the photos near it: Gaussian "
+        "weights over the distance, with this width in median legs between stops (ratio).",
+    )
+    look_smoothing: float = Field(
+        0.02,
+        ge=0,
+        description="Gaussian smoothing of the viewing direction along the tour, as a fraction "
+        "of its frames (fraction; 0 = none).",
+    )
+    max_turn_deg: float = Field(
+        3.0,
+        gt=0,
+        description="The view turns (heading or pitch) by at most this angle from one frame to "
+        "the next, or twice its mean turn per frame where a short tour must turn more, "
+        "degrees.",
     )
     sweep_deg: float = Field(
         35.0,
         ge=0,
         le=180,
-        description="The heading sways by up to this angle around the travel direction, "
-        "so the tour looks around the room, degrees.",
+        description="Where the photos near a path point look every way (a robot's circle of "
+        "photos), the camera looks along the path, swaying by up to this angle so the tour "
+        "looks around, degrees.",
     )
     min_coverage: float = Field(
         0.05,
@@ -185,7 +229,9 @@ class PathConfig(Settings):
         "the cloud sparse, so this only rejects views of (almost) nothing (fraction).",
     )
     use_freespace: bool = Field(
-        True, description="Also keep the path inside the mesh stage's free space when present."
+        True,
+        description="Robot: also keep the path inside the mesh stage's free space when present "
+        "(a person's photos never use it).",
     )
 
 
@@ -201,6 +247,9 @@ class ViewerConfig(Settings):
         0.5,
         description="The overview shows the cloud below this height above the cameras "
         "(cuts the ceiling away), metres.",
+    )
+    overview_margin_m: float = Field(
+        0.3, ge=0, description="Border of the overview around the cloud and the path, metres."
     )
     overview_px: int = Field(
         480, ge=64, description="Longest side of the top-down overview image, pixels."
@@ -227,6 +276,14 @@ class TourConfig(Settings):
     path: PathConfig = Field(default_factory=PathConfig)
     viewer: ViewerConfig = Field(default_factory=ViewerConfig)
     video: bool = Field(True, description="Write tour.mp4 (H.264 when imageio-ffmpeg is present).")
+    photos_depth_m: float = Field(
+        2.0,
+        gt=0,
+        description="A person's photos (robot: photos) carry no metric scale the tour relies "
+        "on (sfm.known_distance or not): every length setting of the tour (the *_m fields) "
+        "is scaled so that the photos' median distance to what they see (sparse model) "
+        "counts as this many metres.",
+    )
     eval_holdout: int = Field(
         24,
         ge=0,

@@ -5,6 +5,11 @@ from the *other* photos at its SfM pose and compare with the photo itself (a tru
 the simulator). Two baselines in the same run: the photo with the nearest pose shown as is
 ("nearest photo"), and that single photo reprojected through the proxy ("nearest photo
 reprojected"; ULR restricted to one source, holes black).
+
+The proxy is the dense cloud fused from all photos, the held-out one included (re-fusing it
+per held-out photo would re-run the dense stage): its geometry, and the colour of the few
+points no other photo sees (``proxy_colour_fraction`` of the view), may still carry the
+held-out photo.
 """
 
 from __future__ import annotations
@@ -73,7 +78,8 @@ def leave_one_out(renderer: UlrRenderer, n_holdout: int = 24, progress: bool = T
 
     Returns:
         dict with ``per_view`` rows (name, psnr/ssim of ulr, nearest, nearest_reprojected,
-        coverage) and ``summary`` (mean and median of each metric).
+        coverage, black and dense-cloud-coloured fractions of the ULR view) and ``summary``
+        (mean and median of each metric).
     """
     from tqdm import tqdm
 
@@ -88,12 +94,14 @@ def leave_one_out(renderer: UlrRenderer, n_holdout: int = 24, progress: bool = T
         plain = renderer.sources[nn].image
         if plain.shape != s.image.shape:
             plain = cv2.resize(plain, (s.image.shape[1], s.image.shape[0]))
-        rep = renderer.render(s.camera, s.R, s.t, only={nn}, k=1)
+        rep = renderer.render(s.camera, s.R, s.t, only={nn}, k=1, fill=False)
         rows.append(
             {
                 "name": s.name,
                 "nearest": renderer.sources[nn].name,
                 "coverage": ulr.coverage,
+                "black_fraction": ulr.black_fraction,
+                "proxy_colour_fraction": ulr.fill_fractions()["proxy"],
                 "psnr_ulr": psnr(ulr.image, s.image),
                 "ssim_ulr": ssim(ulr.image, s.image),
                 "psnr_nearest": psnr(plain, s.image),
@@ -102,7 +110,7 @@ def leave_one_out(renderer: UlrRenderer, n_holdout: int = 24, progress: bool = T
                 "ssim_nearest_reprojected": ssim(rep.image, s.image),
             }
         )
-    keys = [k for k in rows[0] if k.startswith(("psnr", "ssim", "coverage"))]
+    keys = [k for k in rows[0] if k.startswith(("psnr", "ssim", "coverage", "black", "proxy"))]
     summary = {
         "n_holdout": len(rows),
         **{f"mean_{k}": float(np.mean([r[k] for r in rows])) for k in keys},

@@ -12,8 +12,13 @@ source's image border. The k best sources get the ULR weights
 ``w_i = (1 - p_i / p_(k+1)) / (p_i + eps)`` (zero at the (k+1)-th best penalty so sources
 enter and leave the blend smoothly; the 1 / p factor makes a source at the novel view's
 position reproduce its photo: epipole consistency), normalised, and their bilinearly sampled
-colours are blended. A pixel whose point no source sees unoccluded takes the colour of the
-source with the lowest penalty regardless of visibility.
+colours are blended.
+
+No black pixel where a photo saw the surface: a pixel whose point none of the preselected
+sources sees unoccluded is blended from the other photos that see it (the next best); a
+point that no photo sees takes the colour of the nearest point of the dense cloud. Only a
+pixel with no proxy surface at all stays black (:attr:`RenderResult.fill` says which pixel
+came from where).
 
 The kernels run on CPU or GPU (taichi). Entry point: :class:`UlrRenderer`.
 """
@@ -97,8 +102,8 @@ def load_sources(rec, image_dir: str | Path) -> list[SourceView]:
 
 # --------------------------------------------------------------------------- taichi kernel
 # The kernel's parameter vector ``prm``: the penalty weights a (angle), b (resolution) and
-# g (field of view), border_px, vis_tol, eps and near, at these indices.
-_A, _B, _G, _BORDER, _VIS_TOL, _EPS, _NEAR = range(7)
+# g (field of view), border_px, vis_tol, eps, near and through_tol, at these indices.
+_A, _B, _G, _BORDER, _VIS_TOL, _EPS, _NEAR, _THROUGH = range(8)
 
 
 @ti.func
@@ -159,13 +164,16 @@ def _penalty(P, dT, lenT, s_pose: ti.template(), s, dist_b, prm: ti.template()):
 
 
 @ti.func
-def _unoccluded(s_vis: ti.template(), s_vscale: ti.template(), s, uv, zs, vis_tol):
+def _unoccluded(s_vis: ti.template(), s_vscale: ti.template(), s, uv, zs, vis_tol, through_tol):
     """Whether source ``s`` sees the point at its depth ``zs`` and pixel ``uv``: not farther
-    than the proxy depth rendered into the source there (tolerance ``vis_tol``)."""
+    than the proxy depth rendered into the source there (tolerance ``vis_tol``), and not
+    nearer by more than ``through_tol`` (relative) either."""
     vx = ti.min(int(uv[0] * s_vscale[s, 0]), s_vis.shape[2] - 1)
     vy = ti.min(int(uv[1] * s_vscale[s, 1]), s_vis.shape[1] - 1)
     dvis = s_vis[s, vy, vx]
-    return zs <= dvis * (1.0 + vis_tol)
+    # nothing nearer hides the point, and the source does not see a surface well behind it
+    # (then the point is empty space the source looks through: a guess of the hole filling)
+    return zs <= dvis * (1.0 + vis_tol) and (dvis > 1e29 or zs >= dvis * (1.0 - through_tol))
 
 
 @ti.func
@@ -227,34 +235,21 @@ def _rank_sources(P, C, s_pose: ti.template(), s_cam: ti.template(), s_on: ti.te
                   bp: ti.template(), bi: ti.template(), bu: ti.template(), bv: ti.template(),
                   kk: ti.template()):  # fmt: skip
     """Fill the lists with the enabled sources that see ``P`` (novel centre ``C``)
-    unoccluded, best first; if none does, the source with the lowest penalty anyway."""
+    unoccluded, best first (none: the lists stay empty and the pixel is filled later)."""
     dT = P - C
     lenT = dT.norm() + 1e-9
-    any_p = _BIGP
-    any_i = -1
-    any_u = 0.0
-    any_v = 0.0
     for s in range(s_pose.shape[0]):
         if s_on[s] != 0:
             q = _in_source(s_pose, s, P)
             if q[2] > prm[_NEAR]:
                 uv = project_px(q[0], q[1], q[2], s_cam, s)
                 dist_b = _border_distance(uv, s_cam, s)
-                if dist_b > 0.5:
+                # inside the image, and not occluded: the proxy depth rendered into the
+                # source agrees
+                tol = prm[_VIS_TOL]
+                if dist_b > 0.5 and _unoccluded(s_vis, s_vscale, s, uv, q[2], tol, prm[_THROUGH]):
                     pen = _penalty(P, dT, lenT, s_pose, s, dist_b, prm)
-                    if pen < any_p:
-                        any_p = pen
-                        any_i = s
-                        any_u = uv[0]
-                        any_v = uv[1]
-                    # visibility against the proxy depth rendered into the source
-                    if _unoccluded(s_vis, s_vscale, s, uv, q[2], prm[_VIS_TOL]):
-                        _insert_best(bp, bi, bu, bv, pen, s, uv[0], uv[1], kk)
-    if bi[0] < 0 and any_i >= 0:  # nobody sees P unoccluded: best source anyway
-        bp[0] = any_p
-        bi[0] = any_i
-        bu[0] = any_u
-        bv[0] = any_v
+                    _insert_best(bp, bi, bu, bv, pen, s, uv[0], uv[1], kk)
 
 
 @ti.func
@@ -315,7 +310,7 @@ def _make_blend_kernel(k: int):
     ):
         """``pose`` (3, 4) novel [R | t]; ``s_pose`` (S, 3, 5) sources [R | t | C];
         ``s_cam`` (S, 10) fx fy cx cy k1 k2 p1 p2 W H; ``s_vscale`` (S, 2) vis-map scale;
-        ``prm`` = a, b, g, border_px, vis_tol, eps, near."""
+        ``prm`` = a, b, g, border_px, vis_tol, eps, near, through_tol."""
         H = depth.shape[0]
         W = depth.shape[1]
         C = _novel_centre(pose)
@@ -347,6 +342,10 @@ def _blend_kernel(k: int):
     return _KERNELS[k]
 
 
+# RenderResult.fill codes: how a pixel got its colour
+FILL_BLEND, FILL_NEXT, FILL_PROXY, FILL_NONE = 0, 1, 2, 3
+
+
 @dataclass
 class RenderResult:
     """One synthesized view.
@@ -356,12 +355,33 @@ class RenderResult:
         depth: (H, W) float32 proxy z-depth, metres (``inf`` = no surface).
         sources: (H, W) int32 number of blended sources per pixel.
         coverage: fraction of pixels with a proxy surface and at least one source.
+        fill: (H, W) uint8 where each pixel's colour came from: ``FILL_BLEND`` (the k best
+            of the preselected photos), ``FILL_NEXT`` (the next best photos that see the
+            point), ``FILL_PROXY`` (no photo sees it: the dense cloud's colour) or
+            ``FILL_NONE`` (no surface: black, unless inpainted).
     """
 
     image: np.ndarray
     depth: np.ndarray
     sources: np.ndarray
     coverage: float
+    fill: np.ndarray | None = None
+
+    @property
+    def black_fraction(self) -> float:
+        """Fraction of pixels that got no colour (``FILL_NONE``)."""
+        if self.fill is None:
+            return float((self.sources == 0).mean())
+        return float((self.fill == FILL_NONE).mean())
+
+    def fill_fractions(self) -> dict[str, float]:
+        """Fractions of pixels per fill code: ``blend``, ``next``, ``proxy``, ``none``."""
+        f = self.fill if self.fill is not None else np.where(self.sources > 0, 0, 3)
+        return {
+            name: float((f == code).mean())
+            for name, code in (("blend", FILL_BLEND), ("next", FILL_NEXT),
+                               ("proxy", FILL_PROXY), ("none", FILL_NONE))
+        }  # fmt: skip
 
 
 class UlrRenderer:
@@ -400,6 +420,7 @@ class UlrRenderer:
         Hv, Wv = max(1, round(Hm * vs)), max(1, round(Wm * vs))
         vis = np.full((S, Hv, Wv), np.inf, np.float32)
         vscale = np.zeros((S, 2), np.float32)
+        self._source_depth = np.full(S, np.nan)
         for s, src in enumerate(sources):
             h, w = src.camera.height, src.camera.width
             img[s, :h, :w] = src.image
@@ -413,6 +434,9 @@ class UlrRenderer:
             # without points must not hide what the source photographed)
             vis[s, :vh, :vw] = self.splatter.raw_depth(src.camera.resized(vw, vh), src.R, src.t)
             vscale[s] = (vw / w, vh / h)
+            centre = vis[s, vh // 4 : vh - vh // 4, vw // 4 : vw - vw // 4]
+            centre = centre[np.isfinite(centre)]
+            self._source_depth[s] = np.median(centre) if len(centre) else np.nan
         vis[~np.isfinite(vis)] = 1e30  # no proxy there: nothing occludes
         self._img = ti.ndarray(ti.u8, img.shape)
         self._img.from_numpy(img)
@@ -423,10 +447,32 @@ class UlrRenderer:
         self._vscale = vscale
         self.centers = pose[:, :, 4].astype(np.float64)
         self._rays: dict[Camera, np.ndarray] = {}
+        self._tree = None  # KD-tree of the proxy, for the colour of points no photo sees
 
     @property
     def num_sources(self) -> int:
         return len(self.sources)
+
+    def source_targets(self) -> np.ndarray:
+        """Where each photo looks: the dense cloud's mass in front of it.
+
+        The point on the photo's optical axis at the median proxy depth of the central half
+        of its image (the splats it sees there, no hole filling).
+
+        Returns:
+            (S, 3) points; NaN for a photo whose centre sees no dense point.
+        """
+        fwd = np.array([s.R[2] for s in self.sources])
+        return self.centers + self._source_depth[:, None] * fwd
+
+    def _proxy_colour(self, P: np.ndarray) -> np.ndarray:
+        """(K, 3) float colours of the dense points nearest to world points (K, 3)."""
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.proxy.points.astype(np.float64))
+        _, idx = self._tree.query(np.asarray(P, np.float64))
+        return self.proxy.colors[idx].astype(np.float32)
 
     def _preselect(self, depth, cam, R, t, on, k, max_sources, step_px=16):
         """Keep the sources that can matter for this view (speed; same result in practice).
@@ -486,7 +532,7 @@ class UlrRenderer:
         return on
 
     def _kernel_params(self) -> np.ndarray:
-        """The kernel's ``prm`` (float32): a, b, g, border_px, vis_tol, eps, near."""
+        """The kernel's ``prm`` (float32): a, b, g, border_px, vis_tol, eps, near, through."""
         u = self.cfg.ulr
         return np.array(
             [
@@ -497,6 +543,7 @@ class UlrRenderer:
                 u.visibility_tolerance,
                 u.epsilon,
                 self.cfg.proxy.near_m,
+                u.see_through_tolerance,
             ],
             np.float32,
         )
@@ -509,6 +556,7 @@ class UlrRenderer:
         exclude: set[int] | None = None,
         only: set[int] | None = None,
         k: int | None = None,
+        fill: bool = True,
     ) -> RenderResult:
         """Render one view from any pose.
 
@@ -519,19 +567,48 @@ class UlrRenderer:
             exclude: indices of sources not to use (leave-one-out evaluation).
             only: if given, use only these sources.
             k: sources per pixel (default ``cfg.ulr.k``).
+            fill: fill what the blend leaves empty from the next best photos and the cloud's
+                colour (False: those pixels stay black, e.g. for a one-photo baseline).
 
         Returns:
-            The image, proxy depth, per-pixel source count and coverage.
+            The image, proxy depth, per-pixel source count, coverage and fill codes.
         """
         u = self.cfg.ulr
         depth = self.splatter.depth(cam, R, t)
         if cam not in self._rays:
             self._rays[cam] = cam.pixel_rays()
-        on = self._enabled(exclude, only)
+        enabled = self._enabled(exclude, only)
         kk = int(k or u.k)
+        on = enabled
         if u.max_sources > 0:
-            on = self._preselect(depth, cam, R, t, on, kk, u.max_sources)
-        d = np.where(np.isfinite(depth), depth, 1e30).astype(np.float32)
+            on = self._preselect(depth, cam, R, t, enabled, kk, u.max_sources)
+        surface = np.isfinite(depth)
+        d = np.where(surface, depth, 1e30).astype(np.float32)
+        out, used = self._blend(cam, R, t, d, on, kk)
+        how = np.where(used > 0, FILL_BLEND, FILL_NONE).astype(np.uint8)
+        hole = surface & (used == 0)
+        if fill and hole.any() and (on != enabled).any():
+            # the next best: every other photo that sees these points
+            d2 = np.where(hole, d, 1e30).astype(np.float32)
+            out2, used2 = self._blend(cam, R, t, d2, enabled, kk)
+            got = hole & (used2 > 0)
+            out[got], used[got], how[got] = out2[got], used2[got], FILL_NEXT
+            hole &= ~got
+        if fill and hole.any() and enabled.any():  # no photo sees it: the cloud's colour
+            ii, jj = np.nonzero(hole)
+            xc = self._rays[cam][ii, jj] * depth[ii, jj, None]
+            P = (xc - np.asarray(t, np.float64)) @ np.asarray(R, np.float64)
+            out[ii, jj] = self._proxy_colour(P)
+            how[hole] = FILL_PROXY
+        img = np.clip(out + 0.5, 0, 255).astype(np.uint8)
+        covered = used > 0
+        black = how == FILL_NONE
+        if u.inpaint_px > 0 and black.any() and not black.all():
+            img = cv2.inpaint(img, black.astype(np.uint8), u.inpaint_px, cv2.INPAINT_TELEA)
+        return RenderResult(img, depth, used, float(covered.mean()), how)
+
+    def _blend(self, cam, R, t, d, on, kk):
+        """Run the ULR kernel: (H, W, 3) float32 colours and (H, W) int32 source counts."""
         out = np.zeros((cam.height, cam.width, 3), np.float32)
         used = np.zeros((cam.height, cam.width), np.int32)
         pose = np.concatenate([np.asarray(R), np.asarray(t).reshape(3, 1)], 1).astype(np.float32)
@@ -549,8 +626,4 @@ class UlrRenderer:
             out,
             used,
         )
-        img = np.clip(out + 0.5, 0, 255).astype(np.uint8)
-        covered = used > 0
-        if u.inpaint_px > 0 and not covered.all() and covered.any():
-            img = cv2.inpaint(img, (~covered).astype(np.uint8), u.inpaint_px, cv2.INPAINT_TELEA)
-        return RenderResult(img, depth, used, float(covered.mean()))
+        return out, used

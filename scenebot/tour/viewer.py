@@ -27,11 +27,11 @@ class OverviewMap:
         colors: (N, 3) uint8 RGB.
         extra_xy: (K, 2) positions that must be inside the map (path, cameras), metres.
         size_px: longest side, pixels (``tour.viewer.overview_px``).
-        margin_m: border around the content, metres.
+        margin_m: border around the content, metres (``tour.viewer.overview_margin_m``).
         max_z: points above this height (metres) are left out (the ceiling).
     """
 
-    def __init__(self, points, colors, extra_xy, size_px, margin_m=0.3, max_z=None):
+    def __init__(self, points, colors, extra_xy, size_px, margin_m, max_z=None):
         if max_z is not None:  # leave out the ceiling: a cut-away view from above
             low = np.asarray(points)[:, 2] < max_z
             points, colors = np.asarray(points)[low], np.asarray(colors)[low]
