@@ -100,6 +100,8 @@ def round_products(wildcards):
             files += [f"{d}/capture/log.jsonl", f"{d}/capture/trajectory.png"]
         files += [f"{d}/sfm/{f}" for f in ("report.json", "map.png")]
         files += [f"{d}/{f}" for f in ("goals.json", "goals.png")]
+        if PHOTOS:  # each advised shot rendered from the photos (rule goals_preview)
+            files.append(f"{d}/goals_preview.png")
         if not PHOTOS:  # a person's photos: no robot to plan paths for
             files += [f"{d}/{f}" for f in ("paths.json", "navgrid.png")]
     return files

@@ -154,6 +154,41 @@ rule goals:
         "2> >(tee {log:q} >&2)"
 
 
+# robot: photos: each shot advised to the person rendered from the round's photos by the tour's
+# renderer (proxy: the sparse map's points), the part no photo sees in red. A rule of its own
+# (round_products asks for it only for a person's photos): a robot's goals have no such file.
+rule goals_preview:
+    input:
+        code=stage_code("goals-preview"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+        goals=f"{RESULTS}/round_{{r}}/goals.json",
+        photos=captures_until,
+    output:
+        picture=report(
+            f"{RESULTS}/round_{{r}}/goals_preview.png",
+            caption="../report/goals_preview.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
+    log:
+        f"{RESULTS}/logs/round_{{r}}/goals_preview.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/goals_preview.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    threads: ALL_CORES
+    params:
+        py=PY,
+        cfg=stage_params("goals", "tour"),
+        sfm=lambda w, input: Path(input.model[0]).parent,
+        images=lambda w: image_root(RESULTS),
+    shell:
+        "{params.py:q} -m scenebot goals-preview --params {params.cfg:q} "
+        "--sfm-dir {params.sfm:q} --image-dir {params.images:q} "
+        "--goals-json {input.goals:q} --preview-png {output.picture:q} "
+        "2> >(tee {log:q} >&2)"
+
+
 # A checkpoint: the last decision of a round. Whether the campaign goes on to another round
 # depends on what the round decided, and the next round's capture waits for it.
 checkpoint plan:

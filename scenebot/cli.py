@@ -55,6 +55,7 @@ STAGE_FILES = {
     "goals": ("candidates_csv", "freespace_npz", "sfm_dir?", "previous_goals_json?",
               "previous_freespace_npz?", "mesh_ply?", "goals_json", "goals_png?"),
     "plan": ("sfm_dir", "goals_json", "navgrid_npz", "paths_json", "plot_png?"),
+    "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png"),
 }  # fmt: skip
 
 
@@ -116,6 +117,15 @@ def cmd_goals(args) -> int:
     person = cfg.robot == "photos"
     doc = run(cfg.goals, files(args, GoalsInputs), files(args, GoalsOutputs), person=person)
     print(json.dumps(doc))
+    return 0
+
+
+def cmd_goals_preview(args) -> int:
+    from scenebot.goals.preview import PreviewInputs, PreviewOutputs, run
+
+    cfg = _config(args)
+    summary = run(cfg.goals, cfg.tour, files(args, PreviewInputs), files(args, PreviewOutputs))
+    print(json.dumps(summary))
     return 0
 
 
@@ -225,6 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
         ("score", cmd_score, "random candidates scored by the rendering-quality heuristic"),
         ("goals", cmd_goals, "the best goals; whether exploration is complete"),
         ("plan", cmd_plan, "navigation grid and paths to the goals"),
+        ("goals-preview", cmd_goals_preview, "a person's advised shots rendered from the photos"),
     ):
         sp = sub.add_parser(name, help=text)
         with_config(sp)

@@ -101,3 +101,11 @@ class GoalsConfig(Settings):
         le=1.0,
         description="Candidates whose render hits the mesh on fewer pixels than this are skipped.",
     )
+    preview_width: int = Field(
+        240,
+        ge=16,
+        le=2000,
+        description="robot: photos: width (pixels) of each advised shot's preview in "
+        "goals_preview.png (the view rendered from the photos by the tour's renderer, "
+        "tour.ulr and tour.proxy settings; the height keeps the photos' aspect).",
+    )

@@ -189,3 +189,31 @@ def plot_person_goals(
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def plot_shot_previews(path: str | Path, tiles: list[np.ndarray], shots: list[dict],
+                       title: str) -> None:  # fmt: skip
+    """One tile per advised shot: its preview (red where no photo sees the view), captioned
+    with the shot's number, predicted gain (deg) and the share of the view marked missing."""
+    plt = pyplot()
+    n = max(len(tiles), 1)
+    cols = min(n, 5)
+    rows = -(-n // cols)
+    h, w = tiles[0].shape[:2] if tiles else (180, 240)
+    fig, axes = plt.subplots(rows, cols, figsize=(cols * (w / 80 + 0.3), rows * (h / 80 + 0.6)),
+                             squeeze=False)  # fmt: skip
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, tile, shot in zip(axes.ravel(), tiles, shots, strict=False):
+        ax.imshow(tile)
+        gain = "?" if shot["score_deg"] is None else f"{shot['score_deg']:.1f} deg"
+        ax.set_title(f"shot {shot['rank']}: gain {gain}\n"
+                     f"{100 * shot['missing_fraction']:.0f}% missing", fontsize=8)  # fmt: skip
+    if not tiles:
+        axes[0, 0].text(0.5, 0.5, "no shot advised", ha="center", va="center")
+    import textwrap
+
+    fig.suptitle(textwrap.fill(title, max(30, int(cols * (w / 80 + 0.3) * 14))), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
