@@ -466,13 +466,40 @@ class UlrRenderer:
         return self.centers + self._source_depth[:, None] * fwd
 
     def _proxy_colour(self, P: np.ndarray) -> np.ndarray:
-        """(K, 3) float colours of the dense points nearest to world points (K, 3)."""
+        """(K, 3) float colours of the dense points nearest to world points (K, 3): the
+        approximate nearest (within twice the nearest distance, ``eps=1``): an exact query
+        from a hole-filled background far from the cloud visits most of a dense cloud's
+        tree (100,000 such queries: 104 s exact, 2 s approximate on the temple's cloud)."""
         if self._tree is None:
             from scipy.spatial import cKDTree
 
             self._tree = cKDTree(self.proxy.points.astype(np.float64))
-        _, idx = self._tree.query(np.asarray(P, np.float64))
+        _, idx = self._tree.query(np.asarray(P, np.float64), eps=1.0, workers=-1)
         return self.proxy.colors[idx].astype(np.float32)
+
+    def _hole_colours(self, cam, R, t, depth, hole, ii, jj, step: int = 2) -> np.ndarray:
+        """The cloud's colour for the hole pixels ``(ii, jj)``: looked up at the hole's pixels
+        on a ``step``-pixel grid (every pixel of a hole the grid misses), each hole pixel
+        taking the colour of the nearest looked-up pixel in the image."""
+        sample = hole & (np.arange(hole.shape[0])[:, None] % step == 0)
+        sample &= np.arange(hole.shape[1])[None, :] % step == 0
+        n_lab, lab = cv2.connectedComponents(hole.astype(np.uint8), connectivity=8)
+        missed = np.setdiff1d(np.arange(1, n_lab), np.unique(lab[sample]))
+        if len(missed):
+            sample |= np.isin(lab, missed)  # small holes between the grid's pixels
+        si, sj = np.nonzero(sample)
+        xc = self._rays[cam][si, sj] * depth[si, sj, None]
+        P = (xc - np.asarray(t, np.float64)) @ np.asarray(R, np.float64)
+        colours = self._proxy_colour(P)
+        if len(si) == len(ii):
+            return colours
+        # nearest looked-up pixel: distance transform to the samples, labelled by pixel
+        _, near = cv2.distanceTransformWithLabels(
+            (~sample).astype(np.uint8), cv2.DIST_L2, 3, labelType=cv2.DIST_LABEL_PIXEL
+        )
+        index = np.zeros(len(si) + 1, np.int64)
+        index[near[si, sj]] = np.arange(len(si))
+        return colours[index[near[ii, jj]]]
 
     def _preselect(self, depth, cam, R, t, on, k, max_sources, step_px=16):
         """Keep the sources that can matter for this view (speed; same result in practice).
@@ -596,9 +623,7 @@ class UlrRenderer:
             hole &= ~got
         if fill and hole.any() and enabled.any():  # no photo sees it: the cloud's colour
             ii, jj = np.nonzero(hole)
-            xc = self._rays[cam][ii, jj] * depth[ii, jj, None]
-            P = (xc - np.asarray(t, np.float64)) @ np.asarray(R, np.float64)
-            out[ii, jj] = self._proxy_colour(P)
+            out[ii, jj] = self._hole_colours(cam, R, t, depth, hole, ii, jj)
             how[hole] = FILL_PROXY
         img = np.clip(out + 0.5, 0, 255).astype(np.uint8)
         covered = used > 0
