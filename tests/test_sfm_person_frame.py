@@ -196,3 +196,31 @@ def test_photos_the_view_graph_connects_to_the_model():
     names = ["a", "b", "c", "d", "x", "y"]  # "e" is not in this set
     assert connected_left_out(graph, names, {"a", "b"}) == ["c", "d"]
     assert connected_left_out(graph, names, {"a", "b", "c", "d"}) == []
+
+
+def test_a_global_model_that_disagrees_with_the_incremental_one_is_measured(tmp_path):
+    """sfm.global_max_disagreement: the same cameras in another frame (a similarity) agree
+    (0); a model with its cameras scattered does not (about 1: residuals of the map's size)."""
+    import pycolmap
+
+    from scenebot.geometry import look_rotation
+    from scenebot.sfm.mapping import _disagreement
+    from scenebot.testing.score import default_intrinsics, write_colmap_model
+
+    rng = np.random.default_rng(0)
+    n = 8
+    C = np.c_[rng.uniform(0, 4, n), rng.uniform(0, 3, n), np.full(n, 0.3)]
+    R = np.array([look_rotation(h) for h in rng.uniform(0, 2 * np.pi, n)])
+    pts = rng.uniform([0, 0, 0], [4, 3, 2], (60, 3))
+
+    def model(name, centres):
+        t = -np.einsum("kij,kj->ki", R, centres)
+        write_colmap_model(tmp_path / name, default_intrinsics(), R, t, pts, np.ones((n, 60), bool))
+        return pycolmap.Reconstruction(str(tmp_path / name))
+
+    inc = model("inc", C)
+    same = model("same", C)  # pycolmap keeps the frame: a similarity is fitted anyway
+    scattered = model("scattered", C + rng.normal(0, 2.0, C.shape))
+    assert _disagreement(inc, same) < 1e-6
+    assert _disagreement(inc, scattered) > 0.3
+    assert _disagreement(inc, None) is None

@@ -62,6 +62,7 @@ def test_all_16_photos_register_with_the_default_settings(temple):
     assert rep["mapper"] == "global"
     g = rep["global_sfm"]
     assert g["kept"] == "global" and g["global_registered"] == 16
+    assert g["disagreement"] < 0.01  # the two models agree on the photos both registered
     assert g["incremental_registered"] < 16
     assert set(g["left_out"]) <= set(DROPPED_BY_INCREMENTAL)
 

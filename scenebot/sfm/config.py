@@ -144,6 +144,18 @@ class SfmConfig(Settings):
             "scale 103 % off. `always`, `never`: for every photo set, or none."
         ),
     )
+    global_max_disagreement: float = Field(
+        0.05,
+        gt=0.0,
+        description=(
+            "The global model is kept only where it agrees with the incremental one on the "
+            "photos both registered: the median distance between their camera centres after "
+            "a similarity fit, as a share of the incremental cameras' median distance from "
+            "their centroid, at most this. Global positioning of photos turned in place can "
+            "fold a map (the canned office photos as a folder: points 2,000 km out) while "
+            "registering more photos; the two models of the temple agree within ~0.2 %."
+        ),
+    )
     global_ba_ratio: float = Field(
         1.1,
         ge=1.01,

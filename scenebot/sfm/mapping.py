@@ -448,14 +448,26 @@ def global_sfm_fallback(
         log.warning("global SfM failed (%s): keeping the incremental model", exc)
         glob = {}
     n_glob = _largest(glob)
-    kept_mapper = "global" if n_glob > n_inc else "incremental"
+    disagreement = _disagreement(best, max(glob.values(), key=lambda r: r.num_reg_images(),
+                                           default=None))  # fmt: skip
+    agrees = disagreement is not None and disagreement <= cfg.global_max_disagreement
+    kept_mapper = "global" if n_glob > n_inc and agrees else "incremental"
     decision = {
         "left_out": left,
         "incremental_registered": n_inc,
         "global_registered": n_glob,
+        "disagreement": disagreement,
         "kept": kept_mapper,
         "seconds": time.perf_counter() - t,
     }
+    if n_glob > n_inc and not agrees:
+        log.warning(
+            "global SfM registered more photos but its cameras disagree with the incremental "
+            "model's by %s of the map's size (sfm.global_max_disagreement = %g): keeping the "
+            "incremental model",
+            "an unknown share" if disagreement is None else f"{disagreement:.1%}",
+            cfg.global_max_disagreement,
+        )
     log.warning(
         "incremental mapping left out %d photo(s) that verified pairs connect to its model "
         "(%s): global SfM registered %d of %d photos against %d; keeping the %s model "
@@ -468,6 +480,29 @@ def global_sfm_fallback(
         kept_mapper,
     )
     return (glob if kept_mapper == "global" else models), kept_mapper, decision
+
+
+def _disagreement(
+    inc: pycolmap.Reconstruction | None, glob: pycolmap.Reconstruction | None
+) -> float | None:
+    """Median distance between the two models' camera centres on the photos both registered,
+    after a similarity fit of the global onto the incremental, as a share of the incremental
+    cameras' median distance from their centroid; None with fewer than 3 shared photos."""
+    from scenebot.sfm.evaluate import umeyama
+
+    if inc is None or glob is None:
+        return None
+    a = {inc.image(i).name: inc.image(i).projection_center() for i in inc.reg_image_ids()}
+    b = {glob.image(i).name: glob.image(i).projection_center() for i in glob.reg_image_ids()}
+    shared = sorted(a.keys() & b.keys())
+    if len(shared) < 3:
+        return None
+    dst = np.array([a[n] for n in shared], np.float64)
+    src = np.array([b[n] for n in shared], np.float64)
+    s, R, t = umeyama(src, dst)
+    resid = np.linalg.norm(s * src @ R.T + t - dst, axis=1)
+    size = float(np.median(np.linalg.norm(dst - dst.mean(0), axis=1)))
+    return float(np.median(resid) / size) if size > 0 else None
 
 
 def _reasons(db_path: Path, names: list[str], kept: set[str], others: set[str], cfg) -> dict:
