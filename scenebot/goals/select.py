@@ -8,6 +8,15 @@ from pathlib import Path
 import numpy as np
 
 
+def _ranked(score: np.ndarray, valid: np.ndarray | None) -> np.ndarray:
+    """Indices of the allowed candidates with a finite score, highest score first (ties in
+    index order)."""
+    score = np.asarray(score, np.float64)
+    ok = np.isfinite(score) if valid is None else (np.isfinite(score) & valid)
+    idx = np.nonzero(ok)[0]
+    return idx[np.argsort(-score[idx], kind="stable")]
+
+
 def heading_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Absolute difference of headings (rad), wrapped to [0, pi]."""
     return np.abs((np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi)
@@ -37,10 +46,7 @@ def select_goals(
     Returns:
         (<= k,) indices of the chosen candidates, best first.
     """
-    score = np.asarray(score, np.float64)
-    ok = np.isfinite(score) if valid is None else (np.isfinite(score) & valid)
-    idx = np.nonzero(ok)[0]
-    idx = idx[np.argsort(-score[idx], kind="stable")]
+    idx = _ranked(score, valid)
     chosen: list[int] = []
     thr = np.deg2rad(angle_deg)
     for c in idx:
@@ -85,10 +91,7 @@ def select_goals_3d(
     Returns:
         (<= k,) indices of the chosen candidates, best first.
     """
-    score = np.asarray(score, np.float64)
-    ok = np.isfinite(score) if valid is None else (np.isfinite(score) & valid)
-    idx = np.nonzero(ok)[0]
-    idx = idx[np.argsort(-score[idx], kind="stable")]
+    idx = _ranked(score, valid)
     dirs = view_directions(poses[:, 3], poses[:, 4])
     cos_thr = np.cos(np.deg2rad(angle_deg))
     chosen: list[int] = []
