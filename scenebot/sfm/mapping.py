@@ -253,14 +253,20 @@ def _ba_options(
     return opts
 
 
-def mapping_options(
-    cfg: SfmConfig, names: list[str], continuing: bool = False, fix_focal: bool = False
-) -> pycolmap.IncrementalPipelineOptions:
-    opts = pycolmap.IncrementalPipelineOptions()
+def _pipeline_options(opts, cfg: SfmConfig, names: list[str]):
+    """What the incremental and the global pipelines' options share: threads, seed, the
+    fewest matches of a pair, the photos to map."""
     opts.num_threads = cfg.num_threads
     opts.random_seed = cfg.random_seed
     opts.min_num_matches = cfg.min_num_matches
     opts.image_names = list(names)
+    return opts
+
+
+def mapping_options(
+    cfg: SfmConfig, names: list[str], continuing: bool = False, fix_focal: bool = False
+) -> pycolmap.IncrementalPipelineOptions:
+    opts = _pipeline_options(pycolmap.IncrementalPipelineOptions(), cfg, names)
     opts.multiple_models = True
     opts.extract_colors = True
     opts.ba_refine_focal_length = not fix_focal
@@ -381,11 +387,7 @@ def connected_left_out(graph: dict[str, set[str]], names: list[str], kept: set[s
 def _global_options(cfg: SfmConfig, names: list[str], fix_focal: bool):
     """pycolmap's global SfM options from the settings (CPU, seeded, our intrinsics
     policy: principal point fixed, focal refined unless held at EXIF)."""
-    opts = pycolmap.GlobalPipelineOptions()
-    opts.num_threads = cfg.num_threads
-    opts.random_seed = cfg.random_seed
-    opts.min_num_matches = cfg.min_num_matches
-    opts.image_names = list(names)
+    opts = _pipeline_options(pycolmap.GlobalPipelineOptions(), cfg, names)
     opts.mapper.num_threads = cfg.num_threads
     opts.mapper.random_seed = cfg.random_seed
     opts.mapper.global_positioning.use_gpu = False

@@ -36,6 +36,7 @@ from scenebot.sfm.features import open_database
 from scenebot.sfm.mapping import (
     MappingResult,
     ObservationTable,
+    _ba_options,
     dropped_photos,
     filter_observations,
     mapping_options,
@@ -351,14 +352,9 @@ def refine_new_photos(reg: Registration, cfg: SfmConfig) -> dict:
     ids = [i for i in reg.new_ids if rec.exists_image(i) and rec.image(i).has_pose]
     before = rec.compute_mean_reprojection_error()
     removed = 0
-    opts = pycolmap.BundleAdjustmentOptions()
-    opts.print_summary = False
-    opts.refine_focal_length = False
-    opts.refine_principal_point = False
-    opts.refine_extra_params = False
+    opts = _ba_options(cfg.num_threads, refine_focal_length=False, refine_extra_params=False)
     opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
     opts.ceres.loss_function_scale = 1.0
-    opts.ceres.solver_options.num_threads = cfg.num_threads
     opts.ceres.solver_options.function_tolerance = cfg.register_ba_function_tolerance
     points = _points_of(rec, ids)
     table = ObservationTable(rec, _images_of(rec, points), points)
