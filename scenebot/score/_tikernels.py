@@ -165,12 +165,13 @@ def raster_triangle_one_div(
     u1, v1 = fx * bb.x / bb.z + cx, fy * bb.y / bb.z + cy
     u2, v2 = fx * c.x / c.z + cx, fy * c.y / c.z + cy
     area = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
-    if ti.abs(area) > 1e-12:
+    ja = ti.max(0, ti.cast(ti.ceil(ti.min(v0, v1, v2) - 0.5), ti.i32))
+    jb = ti.min(H - 1, ti.cast(ti.floor(ti.max(v0, v1, v2) - 0.5), ti.i32))
+    ia = ti.max(0, ti.cast(ti.ceil(ti.min(u0, u1, u2) - 0.5), ti.i32))
+    ib = ti.min(W - 1, ti.cast(ti.floor(ti.max(u0, u1, u2) - 0.5), ti.i32))
+    # a quarter of the small triangles hold no pixel centre: no divisions for them
+    if (ja <= jb) & (ia <= ib) & (ti.abs(area) > 1e-12):
         inv_area = 1.0 / area
-        ja = ti.max(0, ti.cast(ti.ceil(ti.min(v0, v1, v2) - 0.5), ti.i32))
-        jb = ti.min(H - 1, ti.cast(ti.floor(ti.max(v0, v1, v2) - 0.5), ti.i32))
-        ia = ti.max(0, ti.cast(ti.ceil(ti.min(u0, u1, u2) - 0.5), ti.i32))
-        ib = ti.min(W - 1, ti.cast(ti.floor(ti.max(u0, u1, u2) - 0.5), ti.i32))
         q0 = ti.select(area != 0.0, inv_area / a.z, 0.0)
         q1 = ti.select(area != 0.0, inv_area / bb.z, 0.0)
         q2 = ti.select(area != 0.0, inv_area / c.z, 0.0)
@@ -196,14 +197,17 @@ def raster_triangle_one_div(
 def task_view(task: ti.i32, n: ti.i32, n_tasks: ti.i32) -> ti.i32:
     """The view (0..n-1) that parallel task ``task`` of ``n_tasks`` (>= n) starts, or -1.
 
-    Taichi splits a CPU range-for into one contiguous block per thread of at least 512
-    iterations, so a loop over a few hundred views would run on one thread: the per-view
-    kernels loop over ``n_tasks = max(n, 512 * threads)`` tasks instead, view b in the first
-    of its ``n_tasks / n`` tasks, so that every thread gets an equal share of the views.
+    Taichi splits a CPU range-for into blocks of at least 512 iterations, which the threads
+    take in turn, so a loop over a few hundred views would run on one thread: the per-view
+    kernels loop over ``n_tasks`` (``TaichiScorer._n_tasks``: 512 per few views) tasks
+    instead, view b in the first of its ``n_tasks / n`` tasks, so that every block holds a
+    few views and a thread that runs faster (the other one's core is busy with other work)
+    takes more of them. Products in 64 bits: ``task * n`` may pass 2**31.
     """
     b = -1
-    first = (task * n) // n_tasks
-    if n > 0 and (task == 0 or ((task - 1) * n) // n_tasks != first):
+    t = ti.cast(task, ti.i64)
+    first = ti.cast((t * n) // n_tasks, ti.i32)
+    if n > 0 and (task == 0 or ti.cast(((t - 1) * n) // n_tasks, ti.i32) != first):
         b = first
     return b
 
@@ -226,8 +230,11 @@ def raster_view(
     while the triangles are drawn (no division per covered pixel), then its reciprocal
     (``FAR`` where nothing was drawn): the least z, as the plain z-buffer, since the
     correctly rounded reciprocal is monotonic."""
-    for j, i in ti.ndrange(depth.shape[1], depth.shape[2]):
-        depth[b, j, i] = 0.0  # largest 1 / z so far: nothing
+    # nested loops, not ti.ndrange: an ndrange inside a thread's loop splits a flat index
+    # with an integer division and a remainder per pixel
+    for j in range(depth.shape[1]):
+        for i in range(depth.shape[2]):
+            depth[b, j, i] = 0.0  # largest 1 / z so far: nothing
     R, t = view_rt(views, b)
     fx, fy, cx, cy = views[b, 15], views[b, 16], views[b, 17], views[b, 18]
     sides = frustum_sides(fx, fy, cx, cy, depth.shape[2], depth.shape[1])
@@ -242,9 +249,10 @@ def raster_view(
                 False, True,
             )  # fmt: skip
     # 1 / max(1 / z) = min(z) exactly: the division is monotonic
-    for j, i in ti.ndrange(depth.shape[1], depth.shape[2]):
-        s = depth[b, j, i]
-        depth[b, j, i] = ti.select(s > 0.0, 1.0 / s, FAR)
+    for j in range(depth.shape[1]):
+        for i in range(depth.shape[2]):
+            s = depth[b, j, i]
+            depth[b, j, i] = ti.select(s > 0.0, 1.0 / s, FAR)
 
 
 @ti.kernel
@@ -728,6 +736,17 @@ def sees_max(
 
 
 @ti.func
+def at_centre(C: ti.template(), best_c: ti.template()) -> bool:
+    """Whether camera centre C is ``best_c``, the centre of the source that gives the best
+    angle so far: C then forms the same angle (up to the rounding of another code path), so
+    it cannot lower the minimum and its visibility need not be tested. The cameras of a
+    photo ring share one centre, and those sharing the best one's centre follow it in a
+    tile's list (equal keys): they were 40 % of the search's visibility tests in the
+    benchmark."""
+    return (C[0] == best_c[0]) & (C[1] == best_c[1]) & (C[2] == best_c[2])
+
+
+@ti.func
 def angle_row(
     depth: ti.template(),
     R: ti.template(),
@@ -761,10 +780,12 @@ def angle_row(
             kt = (i * tiles_x) // W + tiles_x * ((j * tiles_y) // H)
             best = -2.0  # cosine of the best angle so far; -2 = no source sees P yet
             best_s = -1
+            best_c = ti.Vector([FAR, FAR, FAR])  # best_s's centre (none yet: no camera's)
             # nested ifs: taichi's `and` does not short-circuit (hint = -1 must not be read)
             if hint >= 0:  # noqa: SIM102
                 if sees(src_proj, src_depth, hint, P, tol, near):
-                    d = src_centres[hint] - P
+                    best_c = src_centres[hint]
+                    d = best_c - P
                     best = r.dot(d) / ti.sqrt(d.dot(d) + 1e-30)
                     best_s = hint
             bsq = best * best
@@ -772,7 +793,8 @@ def angle_row(
                 if keys[b, kt, m] <= best:
                     break  # no later source of this tile can beat the best angle
                 s = lists[b, kt, m]
-                d = src_centres[s] - P
+                C = src_centres[s]
+                d = C - P
                 dt = r.dot(d)
                 n2 = d.dot(d)
                 # "cos(angle) > best" without a square root or a division
@@ -781,11 +803,14 @@ def angle_row(
                     better = dt > 0.0 and dt * dt > bsq * n2
                 else:
                     better = dt >= 0.0 or dt * dt < bsq * n2
-                if better and s != best_s:  # noqa: SIM102 (sees() is costly: only if better)
+                # sees() is costly: only if better, and not for a camera at the best one's
+                # centre (photo rings), whose angle is the same
+                if better and not at_centre(C, best_c):  # noqa: SIM102
                     if sees(src_proj, src_depth, s, P, tol, near):
                         best = dt / ti.sqrt(n2 + 1e-30)
                         bsq = best * best
                         best_s = s
+                        best_c = C
             if best < -1.5:
                 out = 180.0
             else:
@@ -966,6 +991,7 @@ def cull_view(
     near_srcs: ti.template(),
     lists: ti.template(),
     tsrc: ti.template(),
+    groups: ti.template(),
     n_active: ti.template(),
 ):
     """The sorted source list of every tile of view b (one thread; see :func:`cull` for the
@@ -981,7 +1007,9 @@ def cull_view(
       theta_m and of the deviations by the angle-sum rules (no inverse trigonometry); sources
       with theta_m <= delta get keys >= 1 (never a reason to stop), ordered by
       cos theta_m - cos delta;
-    - ``tsrc`` (B, tiles, S) receives each listed source's centre and key side by side.
+    - the list holds groups of cameras at one centre (:func:`cull_tile_cpu`): ``tsrc``
+      (B, tiles, S) receives each group's centre and key side by side, ``groups`` the range
+      of its cameras in ``lists``.
 
     ``near_srcs`` (B, 2 S) is scratch: the view's sources, then the block's.
     """
@@ -1026,7 +1054,7 @@ def cull_view(
                     j1 = ((ky + 1) * H + tiles_y - 1) // tiles_y - 1
                     cull_tile_cpu(
                         R, L, K, b, k, i0, i1, j0, j1, bounds, src_centres, planes, near_srcs,
-                        ng, lists, tsrc, n_active,
+                        ng, lists, tsrc, groups, n_active,
                     )  # fmt: skip
 
 
@@ -1048,12 +1076,24 @@ def cull_tile_cpu(
     ng: ti.i32,
     lists: ti.template(),
     tsrc: ti.template(),
+    groups: ti.template(),
     n_active: ti.template(),
 ):
-    """Sorted source list of tile k (pixels i0..i1, j0..j1) of view b among the ``ng``
-    sources of ``near_srcs[b, S:]`` (see :func:`cull_view`)."""
+    """Sorted list of tile k (pixels i0..i1, j0..j1) of view b among the ``ng`` sources of
+    ``near_srcs[b, S:]`` (see :func:`cull_view`), by groups of cameras at one centre.
+
+    The angle of a source depends on its centre only, and the cameras of a photo ring share
+    one: consecutive kept sources (in source order) at the same centre form one group, with
+    one key (computed once) and one entry of the sorted list, so that a pixel's search
+    passes a centre once however many of its cameras the tile holds. ``lists[b, k]`` holds
+    the kept sources in source order (the groups' members), ``tsrc[b, k, g]`` the centre and
+    key of the g-th group in key order, ``groups[b, k, g]`` the range of its members in
+    ``lists[b, k]``, and ``n_active[b, k]`` the number of groups."""
     S = src_centres.shape[0]
-    n = 0
+    n = 0  # groups
+    n_mem = 0  # members
+    last_c = ti.Vector([FAR, FAR, FAR])  # centre of the last kept source (none yet)
+    last_g = 0  # its group's place in the sorted list (no group has been inserted since)
     if bounds[b, k, 0] <= bounds[b, k, 3]:
         Pm = ti.Vector([bounds[b, k, 6], bounds[b, k, 7], bounds[b, k, 8]])
         lo = ti.Vector([bounds[b, k, 0], bounds[b, k, 1], bounds[b, k, 2]])
@@ -1069,31 +1109,57 @@ def cull_tile_cpu(
             s = near_srcs[b, S + g]
             if box_in_frustum(planes, s, lo, hi):
                 C = src_centres[s]
-                ds = C - Pm
-                dn = ds.norm()
-                cos_m = ti.min(1.0, ti.max(-1.0, r.dot(ds) / dn))
-                # cos and sin of delta = delta_1 + asin(rho / dn)
-                key = 3.0 + cos_m  # delta >= pi: no bound
-                if rho < dn and c0 > -1.0:
-                    s2 = rho / dn
-                    c2 = ti.sqrt(ti.max(0.0, 1.0 - s2 * s2))
-                    cd = c1 * c2 - s1 * s2
-                    sd = s1 * c2 + c1 * s2
-                    if sd >= 0.0:
-                        if cos_m < cd:  # theta_m > delta: cos(theta_m - delta)
-                            sin_m = ti.sqrt(ti.max(0.0, 1.0 - cos_m * cos_m))
-                            key = ti.min(1.0, cos_m * cd + sin_m * sd + 1e-6)
-                        else:
-                            key = 1.0 + (cos_m - cd)
-                m = n
-                while m > 0 and tsrc[b, k, m - 1][3] < key:
-                    lists[b, k, m] = lists[b, k, m - 1]
-                    tsrc[b, k, m] = tsrc[b, k, m - 1]
-                    m -= 1
-                lists[b, k, m] = s
-                tsrc[b, k, m] = ti.Vector([C.x, C.y, C.z, key])
-                n += 1
+                lists[b, k, n_mem] = s
+                n_mem += 1
+                if at_centre(C, last_c):  # the last group's centre: one more member
+                    groups[b, k, last_g][1] = n_mem
+                else:
+                    ds = C - Pm
+                    dn = ds.norm()
+                    cos_m = ti.min(1.0, ti.max(-1.0, r.dot(ds) / dn))
+                    # cos and sin of delta = delta_1 + asin(rho / dn)
+                    key = 3.0 + cos_m  # delta >= pi: no bound
+                    if rho < dn and c0 > -1.0:
+                        s2 = rho / dn
+                        c2 = ti.sqrt(ti.max(0.0, 1.0 - s2 * s2))
+                        cd = c1 * c2 - s1 * s2
+                        sd = s1 * c2 + c1 * s2
+                        if sd >= 0.0:
+                            if cos_m < cd:  # theta_m > delta: cos(theta_m - delta)
+                                sin_m = ti.sqrt(ti.max(0.0, 1.0 - cos_m * cos_m))
+                                key = ti.min(1.0, cos_m * cd + sin_m * sd + 1e-6)
+                            else:
+                                key = 1.0 + (cos_m - cd)
+                    m = n
+                    while m > 0 and tsrc[b, k, m - 1][3] < key:
+                        groups[b, k, m] = groups[b, k, m - 1]
+                        tsrc[b, k, m] = tsrc[b, k, m - 1]
+                        m -= 1
+                    groups[b, k, m] = ti.Vector([n_mem - 1, n_mem])
+                    tsrc[b, k, m] = ti.Vector([C.x, C.y, C.z, key])
+                    n += 1
+                    last_c = C
+                    last_g = m
     n_active[b, k] = n
+
+
+@ti.func
+def acos_poly(x: ti.f32) -> ti.f32:
+    """acos(x) (rad) for x in [-1, 1], within 5e-7 rad (3e-5 degrees; libm's acosf: 2e-7)
+    and to 2e-7 of the angle near x = 1: Abramowitz and Stegun 4.4.46, sqrt(1 - |x|) times a
+    polynomial of degree 7 in |x| (error 2e-8), and pi minus that for x < 0: inline, where
+    libm's acosf is a call (a tenth of the samples of a profile of the CPU pass)."""
+    ax = ti.abs(x)
+    p = -0.0012624911
+    p = p * ax + 0.0066700901
+    p = p * ax - 0.0170881256
+    p = p * ax + 0.0308918810
+    p = p * ax - 0.0501743046
+    p = p * ax + 0.0889789874
+    p = p * ax - 0.2145988016
+    p = p * ax + 1.5707963050
+    r = ti.sqrt(1.0 - ax) * p
+    return ti.select(x < 0.0, 3.14159265358979 - r, r)
 
 
 @ti.func
@@ -1110,6 +1176,7 @@ def angle_row_cpu(
     tiles_y: ti.i32,
     lists: ti.template(),
     tsrc: ti.template(),
+    groups: ti.template(),
     n_active: ti.template(),
     tol: ti.f32,
     near: ti.f32,
@@ -1118,11 +1185,12 @@ def angle_row_cpu(
     j: ti.i32,
 ):
     """:func:`angle_row` for one thread that owns the whole view (camera loaded once, points
-    from :func:`view_rays`), reading the tiles' lists of (centre, key) of :func:`cull_view`
-    and the 2x2 maxima of the source depth maps (:func:`sees_max`).
+    from :func:`view_rays`), reading the tiles' lists of groups of cameras at one centre
+    (centre and key, and the cameras) of :func:`cull_view` and the 2x2 maxima of the source
+    depth maps (:func:`sees_max`).
 
-    Returns the row's sum of hit-pixel scores, hit pixels and seen pixels (see
-    :func:`view_sums`)."""
+    ``pix[b, j]`` receives the cosine of each pixel's best angle (-2: no source sees the
+    point, -3: the ray hits nothing); :func:`view_degrees` turns them into degrees."""
     H = depth.shape[1]
     W = depth.shape[2]
     hint = -1
@@ -1131,62 +1199,87 @@ def angle_row_cpu(
     kx = 0
     i_next = (W + tiles_x - 1) // tiles_x  # first column of tile kx + 1
     Dj = D0 + j * Dy
-    total = 0.0
-    hits = 0
-    seen = 0
     for i in range(W):
         if i >= i_next:
             kx += 1
             i_next = ((kx + 1) * W + tiles_x - 1) // tiles_x
         z = depth[b, j, i]
-        out = -1.0
+        out = -3.0
         if z < FAR:
             D = Dj + i * Dx
             P = L + z * D
-            r = -D.normalized()
+            # the direction towards L, not normalised: cos(angle) = r.d / sqrt(DD d.d)
+            r = -D
+            DD = D.dot(D)
             kt = kx + k_row
             best = -2.0  # cosine of the best angle so far; -2 = no source sees P yet
             best_s = -1
-            best_c = hint_c
+            best_c = ti.Vector([FAR, FAR, FAR])  # best_s's centre (none yet: no camera's)
             # nested ifs: taichi's `and` does not short-circuit (hint = -1 must not be read)
             if hint >= 0:  # noqa: SIM102
                 if sees_max(src_proj, src_dmax, src_mm, hint, P, tol, near):
                     d = hint_c - P
-                    best = r.dot(d) / ti.sqrt(d.dot(d) + 1e-30)
+                    best = r.dot(d) / ti.sqrt(DD * d.dot(d) + 1e-30)
                     best_s = hint
-            bsq = best * best
+                    best_c = hint_c
+            bsq = best * best * DD
             for m in range(n_active[b, kt]):
                 e = tsrc[b, kt, m]
                 if e[3] <= best:
                     break  # no later source of this tile can beat the best angle
-                d = ti.Vector([e[0], e[1], e[2]]) - P
+                C = ti.Vector([e[0], e[1], e[2]])
+                d = C - P
                 dt = r.dot(d)
                 n2 = d.dot(d)
-                # "cos(angle) > best" without a square root or a division
+                # "cos(angle) > best" without a square root or a division (bsq: best^2 DD)
                 better = False
                 if best >= 0.0:
                     better = dt > 0.0 and dt * dt > bsq * n2
                 else:
                     better = dt >= 0.0 or dt * dt < bsq * n2
-                if better:
-                    s = lists[b, kt, m]
-                    if s != best_s:  # noqa: SIM102 (sees() is costly: only if better)
+                # sees() is costly: only if better, and not at the best one's centre (the
+                # same angle); then the group's cameras in turn until one sees P
+                if better and not at_centre(C, best_c):
+                    grp = groups[b, kt, m]
+                    for q in range(grp[0], grp[1]):
+                        s = lists[b, kt, q]
                         if sees_max(src_proj, src_dmax, src_mm, s, P, tol, near):
-                            best = dt / ti.sqrt(n2 + 1e-30)
-                            bsq = best * best
+                            best = dt / ti.sqrt(DD * n2 + 1e-30)
+                            bsq = best * best * DD
                             best_s = s
-                            best_c = ti.Vector([e[0], e[1], e[2]])
-            if best < -1.5:
-                out = 180.0
-            else:
-                out = ti.acos(ti.min(1.0, ti.max(-1.0, best))) * 57.29577951308232
+                            best_c = C
+                            break
+            out = best
             hint = best_s
             hint_c = best_c
-            total += out
-            hits += 1
-            seen += ti.cast(out < 179.999, ti.i32)
         pix[b, j, i] = out
-    return total, hits, seen
+
+
+@ti.func
+def view_degrees(pix: ti.template(), sums: ti.template(), b: ti.i32):
+    """Pixel scores (degrees, as :func:`angles`) of view b from the cosines that
+    :func:`angle_row_cpu` leaves in ``pix[b]``, and the view's sums (see :func:`view_sums`).
+
+    A pass of its own, with no branch, rather than inside the search, where the arc cosine's
+    latency held up the next pixel's work."""
+    total = 0.0
+    hits = 0
+    seen = 0
+    for j in range(pix.shape[1]):
+        row_total = 0.0
+        for i in range(pix.shape[2]):
+            c = pix[b, j, i]
+            deg = acos_poly(ti.min(1.0, ti.max(-1.0, c))) * 57.29577951308232
+            out = ti.select(c < -2.5, -1.0, ti.select(c < -1.5, 180.0, deg))
+            pix[b, j, i] = out
+            hit = c > -2.5
+            row_total += ti.select(hit, out, 0.0)
+            hits += ti.cast(hit, ti.i32)
+            seen += ti.cast(hit & (out < 179.999), ti.i32)
+        total += row_total
+    sums[b, 0] = total
+    sums[b, 1] = hits
+    sums[b, 2] = seen
 
 
 @ti.kernel
@@ -1208,6 +1301,7 @@ def score_per_view(
     near_srcs: nd(dtype=ti.i32, ndim=2),
     lists: nd(dtype=ti.i32, ndim=3),
     tsrc: nd(dtype=ti.math.vec4, ndim=3),
+    groups: nd(dtype=ti.math.ivec2, ndim=3),
     n_active: nd(dtype=ti.i32, ndim=2),
     src_proj: nd(dtype=ti.f32, ndim=2),
     src_dmax: nd(dtype=ti.f32, ndim=3),
@@ -1237,19 +1331,11 @@ def score_per_view(
                 tile_bound_cpu(depth, L, D0, Dx, Dy, b, k, tiles_x, tiles_y, bounds)
             cull_view(
                 R, L, K, b, W, H, tiles_x, tiles_y, bounds, src_centres, planes, near_srcs,
-                lists, tsrc, n_active,
+                lists, tsrc, groups, n_active,
             )  # fmt: skip
-            total = 0.0
-            hits = 0
-            seen = 0
             for j in range(H):
-                row_total, row_hits, row_seen = angle_row_cpu(
+                angle_row_cpu(
                     depth, L, D0, Dx, Dy, src_proj, src_dmax, src_mm, tiles_x, tiles_y, lists,
-                    tsrc, n_active, tol, near, pix, b, j,
+                    tsrc, groups, n_active, tol, near, pix, b, j,
                 )  # fmt: skip
-                total += row_total
-                hits += row_hits
-                seen += row_seen
-            sums[b, 0] = total
-            sums[b, 1] = hits
-            sums[b, 2] = seen
+            view_degrees(pix, sums, b)

@@ -31,8 +31,9 @@ On a CPU (``per_view``, the default there) all passes of a view run in one launc
 thread, while the view's z-buffer and tile lists are in that thread's cache, with less work
 than the GPU's batched passes (same results up to float rounding):
 
-- taichi splits a CPU loop into one block per thread of at least 512 iterations, so the loop
-  runs over ``max(views, 512 x threads)`` tasks (a loop over 256 views would use one thread);
+- taichi splits a CPU loop into blocks of at least 512 iterations that the threads take in
+  turn, so the loop runs over 512 tasks per ``VIEWS_PER_BLOCK`` views (a loop over 256 views
+  would use one thread; a thread that other work on its core holds up takes fewer blocks);
 - triangles are stored in Z-order and culled by clusters of 32 before their own test; the
   z-buffer keeps the largest 1/z (no division and no branch per covered pixel: branch
   mispredictions at triangle edges cost more than the arithmetic);
@@ -40,7 +41,12 @@ than the GPU's batched passes (same results up to float rounding):
   camera's share of each lower bound also uses the tile's corner-pixel rays; keys come from
   the angle-sum rules instead of inverse trigonometry;
 - the depth test reads a precomputed 2x2 maximum (one load) and, first, the least and largest
-  of those over 4x4 blocks (16 times smaller, mostly in cache), which decide most tests.
+  of those over 4x4 blocks (16 times smaller, mostly in cache), which decide most tests;
+- a source's angle depends on its centre only: the cameras at one centre (a photo ring's) are
+  one entry of a tile's list (one key; its cameras are tried in turn until one sees the
+  point), and no camera at the centre of the best source so far is tested;
+- the search keeps cosines (and the pixel's ray unnormalised); a pass of its own turns them
+  into degrees with an inline arc cosine.
 """
 
 from __future__ import annotations
@@ -64,6 +70,9 @@ TILE_PX_BATCHED = (8, 12)
 """Default tile size (pixels) of the batched (GPU) passes."""
 TILE_PX_PER_VIEW = (10, 10)
 """Default tile size (pixels) of the per-view (CPU) pass."""
+VIEWS_PER_BLOCK = 8
+"""Views per block of parallel tasks of the per-view (CPU) kernels: the threads take the
+blocks in turn, so a thread whose core other work holds up takes fewer of them."""
 
 
 def init_taichi(backend: str) -> str:
@@ -392,6 +401,7 @@ class TaichiScorer:
         self._lists = ti.ndarray(ti.i32, shape=(self.batch, n_tiles, self.n_src))
         if self.per_view:
             self._tsrc = ti.ndarray(ti.math.vec4, shape=(self.batch, n_tiles, self.n_src))
+            self._groups = ti.ndarray(ti.math.ivec2, shape=(self.batch, n_tiles, self.n_src))
             self._near_srcs = ti.ndarray(ti.i32, shape=(self.batch, 2 * self.n_src))
         else:
             self._keys = ti.ndarray(ti.f32, shape=(self.batch, n_tiles, self.n_src))
@@ -428,10 +438,12 @@ class TaichiScorer:
         self._raster(views32, self._depth, len(views32))
 
     def _n_tasks(self, n: int) -> int:
-        """Parallel tasks of a per-view kernel over n views (see ``_tikernels.task_view``)."""
+        """Parallel tasks of a per-view kernel over n views (see ``_tikernels.task_view``):
+        blocks of 512 tasks, one per ``VIEWS_PER_BLOCK`` views and at least one per thread."""
         import taichi as ti
 
-        return max(n, 512 * max(1, ti.lang.impl.current_cfg().cpu_max_num_threads))
+        threads = max(1, ti.lang.impl.current_cfg().cpu_max_num_threads)
+        return max(n, 512 * max(threads, -(-n // VIEWS_PER_BLOCK)))
 
     def _raster(self, views32, depth, n: int) -> None:
         """Z-buffers of the first n views into ``depth`` (all of it on the batched path)."""
@@ -473,8 +485,9 @@ class TaichiScorer:
                     self._verts, self._faces, self._spheres, self._clusters, v32, m,
                     self._n_tasks(m), self.near,
                     self._depth, tx, ty, self._bounds, self._src_centres, self._planes,
-                    self._near_srcs, self._lists, self._tsrc, self._n_active, self._src_proj,
-                    self._src_dmax, self._src_mm, self.tol, self._pix, self._sums,
+                    self._near_srcs, self._lists, self._tsrc, self._groups, self._n_active,
+                    self._src_proj, self._src_dmax, self._src_mm, self.tol, self._pix,
+                    self._sums,
                 )  # fmt: skip
                 sums.append(self._sums.to_numpy()[:m].astype(np.float64))
                 if return_pixels:
