@@ -347,6 +347,22 @@ def test_select_pairs_exhaustive_small_and_linear_large():
         assert all((s, s + 1) in cross for s in range(n_spots - 1))
 
 
+def test_adding_photos_adds_pairs_but_never_new_pairs_among_the_photos_before():
+    """A round's photos bring their own pairs; the pairs among earlier photos (matched in
+    earlier rounds) are those selected then: nothing is matched again between old photos."""
+    pri = _circle_priors(6, 36, rounds=2)[: 216 + 50]  # round 1: 50 photos
+    kw = dict(exhaustive_max_images=40, spatial_neighbors=10, spatial_max_distance_m=3,
+              sequential_overlap=3, loop_closure_pairs=3)  # fmt: skip
+    old = {q.name for q in pri if q.round == 0}
+    before = set().union(*select_pairs([q for q in pri if q.round == 0], **kw).values())
+    after = select_pairs(pri, **kw)
+    among_old = {pr for pr in set().union(*after.values()) if set(pr) <= old}
+    assert among_old <= before
+    assert len(after["loop"]) >= 3 * (len(pri) - 4)  # each photo has its partners before it
+    names = [q.name for q in pri]
+    assert all(names.index(a) != names.index(b) for a, b in after["loop"])
+
+
 def test_select_pairs_bridges_a_round_without_shared_frame():
     pri = _circle_priors(3, 12, rounds=2)
     p = select_pairs(

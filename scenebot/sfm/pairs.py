@@ -11,7 +11,11 @@ Sources of pairs (union, each pair once):
   round without localization) pair with photos of other frames facing within 30 degrees
   (compass headings are absolute);
 * **sequential**: the next ``sequential_overlap`` photos of the same round;
-* **loop closure**: ``loop_closure_pairs`` photos spread evenly over the whole set.
+* **loop closure**: ``loop_closure_pairs`` photos spread evenly over the photos *before*
+  each photo (capture order): a photo's partners depend on its own place only, so the pairs
+  of photos already matched never change when a round adds photos. (Spreading them over the
+  whole set moved every photo's partners each round: in the default office campaign's round 3
+  the loop pairs were 525 of the 949 pairs matched, mostly between photos already mapped.)
 """
 
 from __future__ import annotations
@@ -101,10 +105,10 @@ def select_pairs(
             for b in range(a + 1, min(a + 1 + sequential_overlap, len(members))):
                 add("sequential", members[a], members[b])
 
-    # loop closure: evenly spread offsets
-    for i in range(n):
+    # loop closure: evenly spread over the photos before i (stable as photos are added)
+    for i in range(1, n):
         for k in range(1, loop_closure_pairs + 1):
-            add("loop", i, (i + (k * n) // (loop_closure_pairs + 1)) % n)
+            add("loop", i, (k * i) // (loop_closure_pairs + 1))
 
     heading = np.array([np.nan if p.heading is None else p.heading for p in priors])
     frames: dict[str, list[int]] = {}
