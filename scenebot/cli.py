@@ -5,6 +5,7 @@ Examples::
     scenebot capture --config config.yaml --out results/office/round_000/capture
     scenebot schema --write
     scenebot check-config config.yaml
+    scenebot rooms-gallery --seeds 1-8 --out rooms.png
 """
 
 from __future__ import annotations
@@ -211,6 +212,17 @@ def cmd_check_config(args) -> int:
     return 0
 
 
+def cmd_rooms_gallery(args) -> int:
+    from scenebot.scene.gallery import draw_rooms, parse_seeds
+    from scenebot.scene.rooms import describe
+
+    seeds = parse_seeds(args.seeds)
+    print(draw_rooms(seeds, Path(args.out)))
+    for seed in seeds:
+        print(json.dumps(describe(seed)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="scenebot", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -291,6 +303,13 @@ def build_parser() -> argparse.ArgumentParser:
     k = sub.add_parser("check-config", help="validate a config file")
     k.add_argument("path")
     k.set_defaults(func=cmd_check_config)
+
+    g = sub.add_parser(
+        "rooms-gallery", help="plan views of the generated rooms (world.builtin: rooms), per seed"
+    )
+    g.add_argument("--seeds", default="1-8", help="seeds, e.g. 1-8 or 1,3,10-12")
+    g.add_argument("--out", required=True, help="the PNG to write")
+    g.set_defaults(func=cmd_rooms_gallery)
     return p
 
 

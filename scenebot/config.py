@@ -59,8 +59,10 @@ class StartPose(Settings):
 class WorldConfig(Settings):
     """The simulated world: a built-in scene or a textured mesh file."""
 
-    builtin: Literal["office", "flat"] | None = Field(
-        "office", description="Built-in scene generator; null when `file` is set."
+    builtin: Literal["office", "flat", "rooms"] | None = Field(
+        "office",
+        description="Built-in scene generator (rooms: one generated room per seed); null "
+        "when `file` is set.",
     )
     file: Path | None = Field(
         None,
@@ -76,8 +78,8 @@ class WorldConfig(Settings):
     def _one_source(self) -> WorldConfig:
         if (self.builtin is None) == (self.file is None):
             raise ValueError(
-                "set exactly one of world.builtin (allowed: 'office', 'flat') and world.file "
-                "(a path to an OBJ, PLY or GLB scene)"
+                "set exactly one of world.builtin (allowed: 'office', 'flat', 'rooms') and "
+                "world.file (a path to an OBJ, PLY or GLB scene)"
             )
         return self
 

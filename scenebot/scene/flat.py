@@ -7,8 +7,9 @@ the wall above them, and furniture (sofa, coffee table on legs, bookcase, TV sta
 wardrobe, desk and chair, cabinets, boxes, a plant) hides parts of the rooms from most
 viewpoints. Textured like the office (:mod:`scenebot.scene.textures`: carpet, parquet, wood,
 fabric, books, posters, pictures, cardboard), except that the walls carry patterned
-wallpaper (:func:`wallpaper`) rather than plain paint: the rooms are small, so photos often
-face a wall from close by, and with plain paint a third of round 0's photos did not register.
+wallpaper (:func:`~scenebot.scene.textures.wallpaper`) rather than plain paint: the rooms are
+small, so photos often face a wall from close by, and with plain paint a third of round 0's
+photos did not register.
 The desk and the chair stand on legs: the robot (0.40 m tall) drives under them.
 
 Plan (metres, floor at z = 0, ceiling at ``ROOM_HEIGHT_M``; the seed jitters the doorways and
@@ -34,8 +35,18 @@ import numpy as np
 
 from scenebot.robot.base import Pose2D
 from scenebot.scene import textures as tx
-from scenebot.scene.mesh import Material, SceneBuilder, SceneMesh
-from scenebot.scene.office import _Layout
+from scenebot.scene.mesh import SceneBuilder, SceneMesh
+from scenebot.scene.parts import (
+    Layout,
+    bookcase,
+    boxes,
+    chair,
+    material,
+    plant,
+    sofa,
+    table_on_legs,
+    wall_with_baseboard,
+)
 
 ROOM_HEIGHT_M = 2.5
 FLAT_W_M = 8.0  # x extent
@@ -44,43 +55,6 @@ PARTITION_X = (4.0, 4.15)  # wall between the rooms
 CORRIDOR_WALL_Y = (3.6, 3.75)  # wall between the rooms and the corridor
 DOOR_WIDTH_M = 0.95
 LINTEL_Z_M = 2.05
-
-
-def wallpaper(rng: np.random.Generator, tint, motif, size: int = 512) -> np.ndarray:
-    """Patterned wallpaper: a jittered lattice of small motifs over a mottled ground.
-
-    Args:
-        rng: generator (the pattern is deterministic from it).
-        tint: (3,) ground colour, 0..255.
-        motif: (3,) motif colour, 0..255.
-        size: texture size (px); the pattern tiles.
-
-    Returns:
-        (size, size, 3) uint8.
-    """
-    import cv2
-
-    ground = np.array(tint, np.float32) * (0.88 + 0.2 * tx.noise(rng, size, 5, 8)[..., None])
-    img = ground.copy()
-    step = size // 8
-    col = tuple(float(c) for c in motif)
-    for i in range(8):
-        for j in range(8):
-            cx = int(j * step + step / 2 + rng.uniform(-0.2, 0.2) * step)
-            cy = int(
-                i * step + step / 2 + (step / 2 if j % 2 else 0) + rng.uniform(-0.2, 0.2) * step
-            )
-            kind = int(rng.integers(0, 3))
-            r = int(rng.uniform(0.15, 0.3) * step)
-            if kind == 0:
-                cv2.circle(img, (cx, cy % size), r, col, -1, cv2.LINE_AA)
-            elif kind == 1:
-                pts = np.array([[cx, cy - r], [cx + r, cy], [cx, cy + r], [cx - r, cy]]) % size
-                cv2.fillConvexPoly(img, pts.astype(np.int32), col, cv2.LINE_AA)
-            else:
-                cv2.ellipse(img, (cx, cy % size), (r, r // 2), float(rng.uniform(0, 180)), 0, 360,
-                            col, 2, cv2.LINE_AA)  # fmt: skip
-    return np.clip(img, 0, 255).astype(np.uint8)
 
 
 @dataclass
@@ -108,32 +82,32 @@ class _Materials:
     window: int
 
 
-def _material(b: SceneBuilder, name: str, texture: np.ndarray, **kw) -> int:
-    return b.material(Material(name, texture, **kw))
-
-
 def _flat_materials(b: SceneBuilder, rng: np.random.Generator) -> _Materials:
     """The fixed materials, their textures drawn in this order."""
     return _Materials(
-        carpet=_material(b, "carpet", tx.carpet(rng, 512)),
-        parquet=_material(b, "parquet", tx.wood(rng, 512, light=True)),
-        corridor_carpet=_material(b, "corridor_carpet", tx.carpet(rng, 512)),
-        ceiling=_material(b, "ceiling", tx.plaster(rng, 256, tint=(236, 236, 232))),
-        wall_a=_material(b, "living_wallpaper", wallpaper(rng, (228, 222, 200), (150, 160, 120))),
-        wall_b=_material(b, "bedroom_wallpaper", wallpaper(rng, (200, 214, 226), (120, 140, 170))),
-        wall_c=_material(b, "corridor_wallpaper", wallpaper(rng, (226, 220, 200), (160, 120, 80))),
-        base=_material(b, "baseboard", tx.metal(rng, 128, tint=(235, 235, 230))),
-        wood=_material(b, "light_wood", tx.wood(rng, 1024, light=True)),
-        dark=_material(b, "dark_wood", tx.wood(rng, 512, light=False)),
-        steel=_material(b, "steel", tx.metal(rng, 256), specular=0.6, shininess=60),
-        sofa=_material(b, "sofa_fabric", tx.fabric(rng)),
-        bed=_material(b, "bed_fabric", tx.fabric(rng)),
-        door=_material(b, "door", tx.door(rng)),
-        tv=_material(b, "tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100),
-        pot=_material(b, "plant_pot", tx.flat((150, 80, 50))),
-        leaves=_material(b, "leaves", wallpaper(rng, (70, 115, 55), (35, 75, 30), 256)),
-        light=_material(b, "ceiling_light", tx.flat((255, 252, 240)), emissive=True),
-        window=_material(b, "window", tx.framed_picture(rng, 512, 384), emissive=True),
+        carpet=material(b, "carpet", tx.carpet(rng, 512)),
+        parquet=material(b, "parquet", tx.wood(rng, 512, light=True)),
+        corridor_carpet=material(b, "corridor_carpet", tx.carpet(rng, 512)),
+        ceiling=material(b, "ceiling", tx.plaster(rng, 256, tint=(236, 236, 232))),
+        wall_a=material(b, "living_wallpaper", tx.wallpaper(rng, (228, 222, 200), (150, 160, 120))),
+        wall_b=material(
+            b, "bedroom_wallpaper", tx.wallpaper(rng, (200, 214, 226), (120, 140, 170))
+        ),
+        wall_c=material(
+            b, "corridor_wallpaper", tx.wallpaper(rng, (226, 220, 200), (160, 120, 80))
+        ),
+        base=material(b, "baseboard", tx.metal(rng, 128, tint=(235, 235, 230))),
+        wood=material(b, "light_wood", tx.wood(rng, 1024, light=True)),
+        dark=material(b, "dark_wood", tx.wood(rng, 512, light=False)),
+        steel=material(b, "steel", tx.metal(rng, 256), specular=0.6, shininess=60),
+        sofa=material(b, "sofa_fabric", tx.fabric(rng)),
+        bed=material(b, "bed_fabric", tx.fabric(rng)),
+        door=material(b, "door", tx.door(rng)),
+        tv=material(b, "tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100),
+        pot=material(b, "plant_pot", tx.flat((150, 80, 50))),
+        leaves=material(b, "leaves", tx.wallpaper(rng, (70, 115, 55), (35, 75, 30), 256)),
+        light=material(b, "ceiling_light", tx.flat((255, 252, 240)), emissive=True),
+        window=material(b, "window", tx.framed_picture(rng, 512, 384), emissive=True),
     )
 
 
@@ -149,26 +123,30 @@ def _floors_and_ceiling(b: SceneBuilder, m: _Materials) -> None:
     b.quad([0, 0, H], [0, D, 0], [W, 0, 0], m.ceiling, uv_size=(1.0, 1.0))
 
 
-def _papered_wall(b: SceneBuilder, o, u, paper: int, base: int) -> None:
-    """An outer wall from ``o`` along ``u`` (seen from inside: u to the right), baseboard."""
-    b.quad(o, u, [0, 0, ROOM_HEIGHT_M], paper, uv_size=(1.0, 1.0))
-    u = np.asarray(u, float)
-    n = np.array([-u[1], u[0], 0.0]) / np.linalg.norm(u)
-    b.quad(np.asarray(o, float) + 0.012 * n, u, [0, 0, 0.08], base, uv_size=(0.5, 0.08))
-
-
 def _outer_walls(b: SceneBuilder, m: _Materials) -> None:
     """Outer walls, papered per space they face, with baseboards."""
     W, D = FLAT_W_M, FLAT_D_M
     px0, px1 = PARTITION_X
     cy0, cy1 = CORRIDOR_WALL_Y
-    _papered_wall(b, [0, 0, 0], [px0, 0, 0], m.wall_a, m.base)  # living room, south
-    _papered_wall(b, [px1, 0, 0], [W - px1, 0, 0], m.wall_b, m.base)  # bedroom, south
-    _papered_wall(b, [W, 0, 0], [0, cy0, 0], m.wall_b, m.base)  # bedroom, east
-    _papered_wall(b, [W, cy1, 0], [0, D - cy1, 0], m.wall_c, m.base)  # corridor, east end
-    _papered_wall(b, [W, D, 0], [-W, 0, 0], m.wall_c, m.base)  # corridor, north
-    _papered_wall(b, [0, D, 0], [0, cy1 - D, 0], m.wall_c, m.base)  # corridor, west end
-    _papered_wall(b, [0, cy0, 0], [0, -cy0, 0], m.wall_a, m.base)  # living room, west
+    wall_with_baseboard(
+        b, [0, 0, 0], [px0, 0, 0], ROOM_HEIGHT_M, m.wall_a, m.base
+    )  # living room, south
+    wall_with_baseboard(
+        b, [px1, 0, 0], [W - px1, 0, 0], ROOM_HEIGHT_M, m.wall_b, m.base
+    )  # bedroom, south
+    wall_with_baseboard(b, [W, 0, 0], [0, cy0, 0], ROOM_HEIGHT_M, m.wall_b, m.base)  # bedroom, east
+    wall_with_baseboard(
+        b, [W, cy1, 0], [0, D - cy1, 0], ROOM_HEIGHT_M, m.wall_c, m.base
+    )  # corridor, east end
+    wall_with_baseboard(
+        b, [W, D, 0], [-W, 0, 0], ROOM_HEIGHT_M, m.wall_c, m.base
+    )  # corridor, north
+    wall_with_baseboard(
+        b, [0, D, 0], [0, cy1 - D, 0], ROOM_HEIGHT_M, m.wall_c, m.base
+    )  # corridor, west end
+    wall_with_baseboard(
+        b, [0, cy0, 0], [0, -cy0, 0], ROOM_HEIGHT_M, m.wall_a, m.base
+    )  # living room, west
 
 
 def _interior_walls(
@@ -241,7 +219,7 @@ def _pictures(b: SceneBuilder, rng: np.random.Generator) -> None:
         w = float(rng.uniform(0.45, 0.7))
         h = w * (1.4 if is_poster else 0.75)
         tex = tx.poster(rng) if is_poster else tx.framed_picture(rng)
-        m = _material(b, f"{'poster' if is_poster else 'picture'}_{k}", tex)
+        m = material(b, f"{'poster' if is_poster else 'picture'}_{k}", tex)
         s = float(rng.uniform(0.05, 0.2))
         pp = np.array([p0[0] + s * u[0], p0[1] + s * u[1], float(rng.uniform(*zr))])
         pp += 0.01 * np.r_[n, 0]
@@ -252,39 +230,28 @@ def _pictures(b: SceneBuilder, rng: np.random.Generator) -> None:
 
 
 # ------------------------------------------------------------------------ living room furniture
-def _sofa(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> float:
+def _sofa(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: Layout) -> float:
     """A sofa against the south wall. Returns its west end (x, m)."""
     sx0 = float(rng.uniform(0.4, 0.9))
-    b.box([sx0, 0.05, 0], [sx0 + 2.0, 0.95, 0.42], m.sofa, (0.5, 0.5))  # seat
-    b.box([sx0, 0.05, 0.42], [sx0 + 2.0, 0.3, 0.85], m.sofa, (0.5, 0.5))  # back
-    for ax in (sx0, sx0 + 1.82):
-        b.box([ax, 0.3, 0.42], [ax + 0.18, 0.95, 0.62], m.sofa, (0.5, 0.5))  # arms
+    sofa(b, (sx0, 0.05, sx0 + 2.0, 0.95), "yneg", m.sofa)
     layout.add(sx0, 0.05, sx0 + 2.0, 0.95)
     return sx0
 
 
-def _coffee_table(b: SceneBuilder, m: _Materials, layout: _Layout, tx0: float) -> None:
+def _coffee_table(b: SceneBuilder, m: _Materials, layout: Layout, tx0: float) -> None:
     """A coffee table on steel legs in front of the sofa, its west end at ``tx0``."""
-    top = 0.42
-    b.box([tx0, 1.35, top - 0.03], [tx0 + 1.0, 1.85, top], {"top": m.wood, "side": m.dark},
-          (0.8, 0.8))  # fmt: skip
-    for lx, ly in ((tx0, 1.35), (tx0 + 0.96, 1.35), (tx0, 1.81), (tx0 + 0.96, 1.81)):
-        b.box([lx, ly, 0], [lx + 0.04, ly + 0.04, top - 0.03], m.steel, (0.1, 0.5))
+    table_on_legs(b, (tx0, 1.35, tx0 + 1.0, 1.85), 0.42, {"top": m.wood, "side": m.dark}, m.steel)
     layout.add(tx0, 1.35, tx0 + 1.0, 1.85)
 
 
-def _bookcase(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+def _bookcase(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: Layout) -> None:
     """A bookcase against the west wall, facing east, five shelves of books."""
     by0 = float(rng.uniform(0.9, 1.3))
-    b.box([0.02, by0, 0], [0.38, by0 + 1.0, 1.9], m.dark, (0.5, 0.5))
-    for k in range(5):
-        z0 = 0.05 + k * 1.8 / 5
-        bk = _material(b, f"books_{k}", tx.books(rng))
-        b.quad([0.384, by0 + 0.02, z0], [0, 0.96, 0], [0, 0, 1.8 / 5 - 0.03], bk)
+    bookcase(b, rng, m.dark, (0.02, by0, 0.38, by0 + 1.0), "xpos", height=1.9, name="books_{k}")
     layout.add(0.02, by0, 0.38, by0 + 1.0)
 
 
-def _tv(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+def _tv(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: Layout) -> None:
     """A TV stand and TV against the partition wall, facing west."""
     px0 = PARTITION_X[0]
     ty0 = float(rng.uniform(0.8, 1.4))
@@ -293,24 +260,23 @@ def _tv(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layou
     layout.add(px0 - 0.45, ty0, px0 - 0.02, ty0 + 1.3)
 
 
-def _plant(b: SceneBuilder, m: _Materials, layout: _Layout) -> None:
+def _plant(b: SceneBuilder, m: _Materials, layout: Layout) -> None:
     """A potted plant in the living room's south-east corner."""
     px0 = PARTITION_X[0]
-    b.prism((px0 - 0.3, 0.3), 0.18, 0.0, 0.4, 10, m.pot)
-    b.prism((px0 - 0.3, 0.3), 0.3, 0.4, 1.2, 8, m.leaves)
+    plant(b, (px0 - 0.3, 0.3), m.pot, m.leaves)
     layout.add(px0 - 0.6, 0.0, px0, 0.6)
 
 
 def _living_room(
     b: SceneBuilder, rng: np.random.Generator, m: _Materials, door_a: float
-) -> tuple[_Layout, float]:
+) -> tuple[Layout, float]:
     """The living room's furniture, the doorway approach kept free.
 
     Returns:
         Its layout and the coffee table's west end (x, m; the start pose is east of it).
     """
     cy0 = CORRIDOR_WALL_Y[0]
-    layout = _Layout([(door_a - 0.2, cy0 - 1.0, door_a + DOOR_WIDTH_M + 0.2, cy0)])
+    layout = Layout([(door_a - 0.2, cy0 - 1.0, door_a + DOOR_WIDTH_M + 0.2, cy0)])
     tx0 = _sofa(b, rng, m, layout) + 0.5
     _coffee_table(b, m, layout, tx0)
     _bookcase(b, rng, m, layout)
@@ -320,7 +286,7 @@ def _living_room(
 
 
 # ---------------------------------------------------------------------------- bedroom furniture
-def _bed(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+def _bed(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: Layout) -> None:
     """A bed with a headboard against the east wall and a nightstand beside it."""
     W = FLAT_W_M
     bedy = float(rng.uniform(0.3, 0.8))
@@ -331,14 +297,14 @@ def _bed(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layo
     layout.add(W - 0.5, bedy + 1.7, W - 0.05, bedy + 2.1)
 
 
-def _wardrobe(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> None:
+def _wardrobe(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: Layout) -> None:
     """A wardrobe against the south wall, next to the partition."""
     wx0 = PARTITION_X[1] + float(rng.uniform(0.05, 0.4))
     b.box([wx0, 0.02, 0], [wx0 + 1.2, 0.62, 2.0], {"ypos": m.wood, "side": m.dark}, (0.6, 1.0))
     layout.add(wx0, 0.02, wx0 + 1.2, 0.62)
 
 
-def _desk(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Layout) -> float:
+def _desk(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: Layout) -> float:
     """A desk on steel legs with books on it, against the partition north of the wardrobe.
 
     Returns:
@@ -348,31 +314,25 @@ def _desk(b: SceneBuilder, rng: np.random.Generator, m: _Materials, layout: _Lay
     dy0 = float(rng.uniform(1.6, 2.1))
     dtop = 0.74
     desk_mats = {"top": m.wood, "side": m.dark}
-    b.box([px1 + 0.02, dy0, dtop - 0.03], [px1 + 0.7, dy0 + 1.2, dtop], desk_mats, (0.8, 0.8))
-    for lx, ly in ((px1 + 0.02, dy0), (px1 + 0.66, dy0), (px1 + 0.02, dy0 + 1.16),
-                   (px1 + 0.66, dy0 + 1.16)):  # fmt: skip
-        b.box([lx, ly, 0], [lx + 0.04, ly + 0.04, dtop - 0.03], m.steel, (0.1, 0.5))
-    bk = _material(b, "desk_books", tx.books(rng, 512, 128))
+    table_on_legs(b, (px1 + 0.02, dy0, px1 + 0.7, dy0 + 1.2), dtop, desk_mats, m.steel)
+    bk = material(b, "desk_books", tx.books(rng, 512, 128))
     b.box([px1 + 0.1, dy0 + 0.8, dtop], [px1 + 0.4, dy0 + 1.1, dtop + 0.14], bk, None)
     layout.add(px1 + 0.02, dy0, px1 + 0.7, dy0 + 1.2)
     return dy0
 
 
-def _desk_chair(b: SceneBuilder, m: _Materials, layout: _Layout, dy0: float) -> None:
+def _desk_chair(b: SceneBuilder, m: _Materials, layout: Layout, dy0: float) -> None:
     """A chair on steel legs east of the desk whose south end is at ``dy0``."""
     cx0 = PARTITION_X[1] + 0.85
     cy = dy0 + 0.35
-    b.box([cx0, cy, 0.42], [cx0 + 0.46, cy + 0.46, 0.48], m.sofa, (0.46, 0.46))
-    b.box([cx0 + 0.4, cy, 0.48], [cx0 + 0.46, cy + 0.46, 0.92], m.sofa, (0.46, 0.46))
-    for lx, ly in ((cx0, cy), (cx0 + 0.43, cy), (cx0, cy + 0.43), (cx0 + 0.43, cy + 0.43)):
-        b.box([lx, ly, 0], [lx + 0.03, ly + 0.03, 0.42], m.steel, (0.1, 0.5))
+    chair(b, cx0, cy, 0.46, "xpos", 0.92, m.sofa, m.steel)
     layout.add(cx0, cy, cx0 + 0.46, cy + 0.46)
 
 
-def _bedroom(b: SceneBuilder, rng: np.random.Generator, m: _Materials, door_b: float) -> _Layout:
+def _bedroom(b: SceneBuilder, rng: np.random.Generator, m: _Materials, door_b: float) -> Layout:
     """The bedroom's furniture, the doorway approach kept free. Returns its layout."""
     cy0 = CORRIDOR_WALL_Y[0]
-    layout = _Layout([(door_b - 0.2, cy0 - 1.0, door_b + DOOR_WIDTH_M + 0.2, cy0)])
+    layout = Layout([(door_b - 0.2, cy0 - 1.0, door_b + DOOR_WIDTH_M + 0.2, cy0)])
     _bed(b, rng, m, layout)
     _wardrobe(b, rng, m, layout)
     dy0 = _desk(b, rng, m, layout)
@@ -390,24 +350,8 @@ def _corridor(b: SceneBuilder, rng: np.random.Generator, m: _Materials) -> None:
     sx = float(rng.uniform(4.6, 6.0))
     b.box([sx, D - 0.4, 0], [sx + 1.3, D - 0.02, 0.8], {"yneg": m.dark, "side": m.wood},
           (0.65, 0.4))  # fmt: skip
-    vase = _material(b, "vase", tx.flat((60, 90, 140)), specular=0.5)
+    vase = material(b, "vase", tx.flat((60, 90, 140)), specular=0.5)
     b.prism((sx + 0.3, D - 0.21), 0.08, 0.8, 1.1, 10, vase)
-
-
-def _boxes(b: SceneBuilder, rng: np.random.Generator, lay: _Layout, x_rng, y_rng, n: int) -> None:
-    """Up to ``n`` cardboard boxes at random free spots of ``x_rng`` x ``y_rng`` (200 tries)."""
-    placed = 0
-    for _ in range(200):
-        if placed >= n:
-            return
-        sx_, sy_ = rng.uniform(0.3, 0.55, 2)
-        sz = float(rng.uniform(0.25, 0.5))
-        x0, y0 = rng.uniform(x_rng[0], x_rng[1] - sx_), rng.uniform(y_rng[0], y_rng[1] - sy_)
-        if lay.fits(x0, y0, x0 + sx_, y0 + sy_, gap=0.55):
-            m = _material(b, f"cardboard_{len(b.materials)}", tx.cardboard(rng))
-            b.box([x0, y0, 0], [x0 + sx_, y0 + sy_, sz], m, None)
-            lay.add(x0, y0, x0 + sx_, y0 + sy_)
-            placed += 1
 
 
 def flat(seed: int) -> SceneMesh:
@@ -441,7 +385,7 @@ def flat(seed: int) -> SceneMesh:
 
     start_xy = (tx0 + 1.5, 2.5)
     living.add(start_xy[0] - 0.5, start_xy[1] - 0.5, start_xy[0] + 0.5, start_xy[1] + 0.5)
-    _boxes(b, rng, living, (0.05, px0 - 0.05), (0.05, cy0 - 0.05), 2)
-    _boxes(b, rng, bedroom, (px1 + 0.05, W - 0.05), (0.05, cy0 - 0.05), 2)
+    boxes(b, rng, living, (0.05, px0 - 0.05), (0.05, cy0 - 0.05), 2)
+    boxes(b, rng, bedroom, (px1 + 0.05, W - 0.05), (0.05, cy0 - 0.05), 2)
     theta = float(rng.uniform(0, 2 * math.pi))
     return b.build(floor_z=0.0, start=Pose2D(start_xy[0], start_xy[1], theta))

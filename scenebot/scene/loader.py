@@ -171,6 +171,7 @@ def load_scene_file(path: Path | str, floor_z: float | None = None) -> SceneMesh
 BUILTIN_SCENES = {
     "office": ("scenebot.scene.office", "office"),
     "flat": ("scenebot.scene.flat", "flat"),
+    "rooms": ("scenebot.scene.rooms", "rooms"),
 }
 
 

@@ -1,8 +1,9 @@
 """Procedural textures for the built-in scenes, deterministic from a numpy Generator.
 
-Each function returns an (H, W, 3) uint8 sRGB image. They imitate what an office offers a
+Each function returns an (H, W, 3) uint8 sRGB image. They imitate what a room offers a
 feature detector: rich (carpet, wood grain, posters, book spines, cork boards, printed
-cardboard) and poor (painted walls, whiteboards, metal).
+cardboard), poor (painted walls, whiteboards, metal) and repeating (wallpaper, tiles,
+parquet: the same pattern every few decimetres, which matching can confuse).
 """
 
 from __future__ import annotations
@@ -275,4 +276,130 @@ def door(rng: np.random.Generator, w: int = 512, h: int = 1024) -> np.ndarray:
         cv2.FONT_HERSHEY_SIMPLEX, w / 700, (20, 20, 20), 2, cv2.LINE_AA,
     )  # fmt: skip
     cv2.circle(img, (int(w * 0.85), int(h * 0.52)), int(w * 0.035), (200, 200, 190), -1)
+    return img
+
+
+def wallpaper(rng: np.random.Generator, tint, motif, size: int = 512) -> np.ndarray:
+    """Patterned wallpaper: a jittered lattice of small motifs over a mottled ground.
+
+    Args:
+        rng: generator (the pattern is deterministic from it).
+        tint: (3,) ground colour, 0..255.
+        motif: (3,) motif colour, 0..255.
+        size: texture size (px); the pattern tiles.
+
+    Returns:
+        (size, size, 3) uint8.
+    """
+    ground = np.array(tint, np.float32) * (0.88 + 0.2 * noise(rng, size, 5, 8)[..., None])
+    img = ground.copy()
+    step = size // 8
+    col = tuple(float(c) for c in motif)
+    for i in range(8):
+        for j in range(8):
+            cx = int(j * step + step / 2 + rng.uniform(-0.2, 0.2) * step)
+            cy = int(
+                i * step + step / 2 + (step / 2 if j % 2 else 0) + rng.uniform(-0.2, 0.2) * step
+            )
+            kind = int(rng.integers(0, 3))
+            r = int(rng.uniform(0.15, 0.3) * step)
+            if kind == 0:
+                cv2.circle(img, (cx, cy % size), r, col, -1, cv2.LINE_AA)
+            elif kind == 1:
+                pts = np.array([[cx, cy - r], [cx + r, cy], [cx, cy + r], [cx - r, cy]]) % size
+                cv2.fillConvexPoly(img, pts.astype(np.int32), col, cv2.LINE_AA)
+            else:
+                cv2.ellipse(img, (cx, cy % size), (r, r // 2), float(rng.uniform(0, 180)), 0, 360,
+                            col, 2, cv2.LINE_AA)  # fmt: skip
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def tiles(
+    rng: np.random.Generator,
+    size: int = 512,
+    n: int = 4,
+    tint=(225, 225, 220),
+    grout=(150, 148, 140),
+) -> np.ndarray:
+    """Ceramic tiles: ``n`` x ``n`` glazed squares with grout lines, each a little off-tone.
+
+    The grid repeats exactly with the texture (and from tile to tile nearly so): a
+    repeating pattern, like a bathroom's or a kitchen's walls and floors.
+
+    Args:
+        rng: generator.
+        size: texture size (px); the texture tiles.
+        n: tiles per side of the texture.
+        tint: (3,) glaze colour, 0..255.
+        grout: (3,) grout colour, 0..255.
+
+    Returns:
+        (size, size, 3) uint8.
+    """
+    cell = size // n
+    tone = 0.94 + 0.1 * rng.random((n, n)).astype(np.float32)
+    shade = np.kron(tone, np.ones((cell, cell), np.float32))
+    speck = 0.97 + 0.05 * noise(rng, size, 5, 16)
+    img = np.array(tint, np.float32) * (shade * speck)[..., None]
+    line = max(2, size // 128)
+    for k in range(n):
+        img[k * cell : k * cell + line, :] = grout
+        img[:, k * cell : k * cell + line] = grout
+    return _to_u8(img)
+
+
+def planks(
+    rng: np.random.Generator, size: int = 512, rows: int = 6, light: bool = True, plank=(0.3, 0.5)
+) -> np.ndarray:
+    """Parquet or panelling: ``rows`` rows of wood planks, joints staggered row by row.
+
+    Each plank is cut from one wood-grain image at a random spot and tinted a little
+    lighter or darker, so neighbouring planks differ but the pattern repeats with the texture.
+
+    Args:
+        rng: generator.
+        size: texture size (px); the texture tiles.
+        rows: rows of planks.
+        light: light or dark wood.
+        plank: range of a plank's length, as a fraction of the texture's width.
+
+    Returns:
+        (size, size, 3) uint8; the grain and the planks run along the rows.
+    """
+    grain = wood(rng, size, light=light).astype(np.float32)
+    img = np.empty_like(grain)
+    h = size // rows
+    for r in range(rows):
+        length = int(size * rng.uniform(*plank))
+        x = -int(rng.integers(0, length))
+        while x < size:
+            x0, x1 = max(x, 0), min(x + length, size)
+            src = int(rng.integers(0, size - h))
+            img[r * h : (r + 1) * h, x0:x1] = grain[src : src + h, x0:x1] * rng.uniform(0.8, 1.15)
+            img[r * h : (r + 1) * h, x0 : min(x0 + 2, size)] *= 0.55  # the joint
+            x += length
+        img[r * h : r * h + 2] *= 0.55
+    img[rows * h :] = img[:1]  # leftover rows when size is not a multiple of rows
+    return _to_u8(img)
+
+
+def cabinet_front(
+    rng: np.random.Generator, doors: int = 2, w: int = 512, h: int = 512, light: bool = True
+) -> np.ndarray:
+    """The front of a cupboard: ``doors`` wooden doors side by side, each with a groove
+    around a raised panel and a metal knob by the gap between the doors.
+
+    Returns:
+        (h, w, 3) uint8, to be stretched once over the front.
+    """
+    img = np.ascontiguousarray(np.rot90(wood(rng, max(w, h), light=light))[:h, :w]).copy()
+    dw = w // doors
+    dark = (50, 32, 18) if light else (30, 18, 10)
+    for k in range(doors):
+        x0, x1 = k * dw, (k + 1) * dw - 1
+        cv2.rectangle(img, (x0, 0), (x1, h - 1), dark, 4)  # the gaps between doors
+        cv2.rectangle(img, (x0 + dw // 8, h // 10), (x1 - dw // 8, h - h // 10), dark, 3)
+        knob_x = x1 - dw // 12 if k % 2 == 0 else x0 + dw // 12
+        cv2.circle(img, (knob_x, h // 2), max(4, w // 64), (190, 190, 185), -1, cv2.LINE_AA)
+        cv2.circle(img, (knob_x, h // 2), max(4, w // 64), (90, 90, 90), 1, cv2.LINE_AA)
     return img
