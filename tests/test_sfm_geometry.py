@@ -354,13 +354,19 @@ def test_adding_photos_adds_pairs_but_never_new_pairs_among_the_photos_before():
     kw = dict(exhaustive_max_images=40, spatial_neighbors=10, spatial_max_distance_m=3,
               sequential_overlap=3, loop_closure_pairs=3)  # fmt: skip
     old = {q.name for q in pri if q.round == 0}
-    before = set().union(*select_pairs([q for q in pri if q.round == 0], **kw).values())
+    alone = select_pairs([q for q in pri if q.round == 0], **kw)
+    before = set().union(*alone.values())
     after = select_pairs(pri, **kw)
     among_old = {pr for pr in set().union(*after.values()) if set(pr) <= old}
     assert among_old <= before
-    assert len(after["loop"]) >= 3 * (len(pri) - 4)  # each photo has its partners before it
-    names = [q.name for q in pri]
-    assert all(names.index(a) != names.index(b) for a, b in after["loop"])
+    # the first round's loop pairs are those it had alone; each later photo has its
+    # partners spread over the photos before its round
+    assert {pr for pr in after["loop"] if set(pr) <= old} == alone["loop"]
+    for q in pri[216:]:
+        partners = {a if b == q.name else b for a, b in after["loop"] if q.name in (a, b)}
+        assert len(partners) == 3 and partners <= old, (q.name, partners)
+        idx = sorted(int(x[3:]) for x in partners)
+        assert idx[-1] - idx[0] >= 216 // 2  # spread over the round before, not one spot
 
 
 def test_select_pairs_bridges_a_round_without_shared_frame():
