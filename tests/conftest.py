@@ -20,6 +20,18 @@ def room() -> SceneMesh:
 
 
 @pytest.fixture
+def workdir(tmp_path):
+    """A folder with the small office config (``tests.fixtures.workflow.SMALL``) for
+    Snakemake runs."""
+    import yaml
+
+    from tests.fixtures.workflow import SMALL
+
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(SMALL))
+    return tmp_path
+
+
+@pytest.fixture
 def sim_cfg() -> SimConfig:
     """Simulator settings with a tiny camera (fast) and default physics."""
     cfg = Config().sim.model_copy(deep=True)
