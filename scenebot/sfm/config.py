@@ -216,9 +216,11 @@ class SfmConfig(Settings):
             "Falls back to the incremental mapper when fewer than min_registered_share of "
             "the new photos register. False: the incremental mapper and the global "
             "refinement every round (office, 25 new photos on 220: ~2 min on 2 cores). Off "
-            "by default until measured beyond the office: there, rounds 1-6 took 33-56 s "
-            "instead of 114-166 s (2 loaded cores), registered as many photos or more, with "
-            "smaller worst errors but a median 0.4 cm worse in round 5 (issue 22)."
+            "by default: in the office rounds 3 and 6 took 49 and 22 s instead of 95 and "
+            "255 s with the same or more photos and errors, but in the flat (repeating "
+            "wallpaper and parquet) round 3's map folded (camera error median 28 cm against "
+            "0.17 cm) and round 1 had six photos > 25 cm off against one "
+            "(benchmarks/bench_sfm_rounds.py, issue 22)."
         ),
     )
     register_ba_function_tolerance: float = Field(
