@@ -8,9 +8,10 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 CORES  ?= 2
 # Debian packages the project needs: libusb for open3d's import; the tests also drive the
-# tour's web viewer in headless Chromium (Selenium with Debian's chromedriver, no downloads).
+# tour's web viewer in headless Chromium (Selenium with Debian's chromedriver, no downloads)
+# and run the workflow on a one-node SLURM cluster (scripts/slurm-local).
 APT_PACKAGES := libusb-1.0-0
-TEST_APT_PACKAGES := chromium chromium-driver
+TEST_APT_PACKAGES := chromium chromium-driver munge slurmctld slurmd slurm-client
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 export TI_SKIP_VERSION_CHECK := ON
 

@@ -7,7 +7,7 @@ import json
 import pytest
 import yaml
 
-from tests.fixtures.workflow import CANNED, photo_folder, snakemake, why
+from tests.fixtures.workflow import CANNED, photo_folder, small_final_stages, snakemake, why
 
 
 @pytest.mark.slow
@@ -31,10 +31,7 @@ def test_bring_your_own_photos_build_the_final_targets(workdir):
     sections and must still accept them (the photo folder is the sfm stage's business), up to
     the dense model and the tour. Small settings keep it cheap."""
     folder, before, cfg = photo_folder(workdir / "my photos")  # a space, as users have
-    cfg["score"] = {"n_candidates": 100}
-    cfg["goals"] = {"k": 2}
-    cfg["dense"] = {"max_image_size": 160, "plane_fill": {"enabled": False}}
-    cfg["tour"] = {"width": 96, "height": 72, "eval_holdout": 0, "path": {"frames": 8}}
+    cfg = small_final_stages(cfg)
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     res = snakemake(workdir)
     assert res.returncode == 0, why(res, workdir)
