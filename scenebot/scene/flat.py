@@ -37,10 +37,13 @@ from scenebot.robot.base import Pose2D
 from scenebot.scene import textures as tx
 from scenebot.scene.mesh import SceneBuilder, SceneMesh
 from scenebot.scene.parts import (
+    HomeMaterials,
     Layout,
     bookcase,
     boxes,
     chair,
+    home_fittings,
+    home_materials,
     material,
     plant,
     sofa,
@@ -58,7 +61,7 @@ LINTEL_Z_M = 2.05
 
 
 @dataclass
-class _Materials:
+class _Materials(HomeMaterials):
     """Indices of the flat's fixed materials in the builder."""
 
     carpet: int
@@ -68,18 +71,8 @@ class _Materials:
     wall_a: int  # living room
     wall_b: int  # bedroom
     wall_c: int  # corridor
-    base: int
-    wood: int
-    dark: int
-    steel: int
     sofa: int
     bed: int
-    door: int
-    tv: int
-    pot: int
-    leaves: int
-    light: int
-    window: int
 
 
 def _flat_materials(b: SceneBuilder, rng: np.random.Generator) -> _Materials:
@@ -96,18 +89,10 @@ def _flat_materials(b: SceneBuilder, rng: np.random.Generator) -> _Materials:
         wall_c=material(
             b, "corridor_wallpaper", tx.wallpaper(rng, (226, 220, 200), (160, 120, 80))
         ),
-        base=material(b, "baseboard", tx.metal(rng, 128, tint=(235, 235, 230))),
-        wood=material(b, "light_wood", tx.wood(rng, 1024, light=True)),
-        dark=material(b, "dark_wood", tx.wood(rng, 512, light=False)),
-        steel=material(b, "steel", tx.metal(rng, 256), specular=0.6, shininess=60),
+        **home_materials(b, rng),  # arguments are evaluated in order: the draws too
         sofa=material(b, "sofa_fabric", tx.fabric(rng)),
         bed=material(b, "bed_fabric", tx.fabric(rng)),
-        door=material(b, "door", tx.door(rng)),
-        tv=material(b, "tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100),
-        pot=material(b, "plant_pot", tx.flat((150, 80, 50))),
-        leaves=material(b, "leaves", tx.wallpaper(rng, (70, 115, 55), (35, 75, 30), 256)),
-        light=material(b, "ceiling_light", tx.flat((255, 252, 240)), emissive=True),
-        window=material(b, "window", tx.framed_picture(rng, 512, 384), emissive=True),
+        **home_fittings(b, rng),
     )
 
 

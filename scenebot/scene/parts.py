@@ -10,6 +10,8 @@ numbers does so in a fixed order: the scenes' seeds depend on it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from scenebot.scene import textures as tx
@@ -60,6 +62,48 @@ def wall_with_baseboard(b: SceneBuilder, o, u, height: float, paper: int, base: 
     u = np.asarray(u, float)
     n = np.array([-u[1], u[0], 0.0]) / np.linalg.norm(u)
     b.quad(np.asarray(o, float) + 0.012 * n, u, [0, 0, 0.08], base, uv_size=(0.5, 0.08))
+
+
+@dataclass
+class HomeMaterials:
+    """Indices in the builder of the materials every home scene shares
+    (:func:`home_materials`, :func:`home_fittings`); a scene's own materials subclass it."""
+
+    base: int
+    wood: int
+    dark: int
+    steel: int
+    door: int
+    tv: int
+    pot: int
+    leaves: int
+    light: int
+    window: int
+
+
+def home_materials(b: SceneBuilder, rng: np.random.Generator) -> dict[str, int]:
+    """The materials every home scene's furniture shares, drawn from ``rng`` in this order:
+    ``base`` (white baseboard), ``wood`` (light wood), ``dark`` (dark wood), ``steel``."""
+    return {
+        "base": material(b, "baseboard", tx.metal(rng, 128, tint=(235, 235, 230))),
+        "wood": material(b, "light_wood", tx.wood(rng, 1024, light=True)),
+        "dark": material(b, "dark_wood", tx.wood(rng, 512, light=False)),
+        "steel": material(b, "steel", tx.metal(rng, 256), specular=0.6, shininess=60),
+    }
+
+
+def home_fittings(b: SceneBuilder, rng: np.random.Generator) -> dict[str, int]:
+    """The fittings every home scene shares, drawn from ``rng`` in this order: ``door``,
+    ``tv`` (black gloss), ``pot`` and ``leaves`` (a plant), ``light`` (ceiling lamps),
+    ``window`` (a landscape picture, emissive)."""
+    return {
+        "door": material(b, "door", tx.door(rng)),
+        "tv": material(b, "tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100),
+        "pot": material(b, "plant_pot", tx.flat((150, 80, 50))),
+        "leaves": material(b, "leaves", tx.wallpaper(rng, (70, 115, 55), (35, 75, 30), 256)),
+        "light": material(b, "ceiling_light", tx.flat((255, 252, 240)), emissive=True),
+        "window": material(b, "window", tx.framed_picture(rng, 512, 384), emissive=True),
+    }
 
 
 def on_wall(

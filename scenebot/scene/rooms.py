@@ -50,12 +50,15 @@ from scenebot.robot.base import Pose2D
 from scenebot.scene import textures as tx
 from scenebot.scene.mesh import SceneBuilder, SceneMesh
 from scenebot.scene.parts import (
+    HomeMaterials,
     Layout,
     Rect,
     bed,
     bookcase,
     cabinet,
     chair,
+    home_fittings,
+    home_materials,
     material,
     on_wall,
     plant,
@@ -594,26 +597,16 @@ def _floor_texture(rng: np.random.Generator, family: str) -> np.ndarray:
 
 
 @dataclass
-class _Materials:
+class _Materials(HomeMaterials):
     """Indices of a room's materials in the builder: per zone, then shared ones."""
 
     walls: list[int | None]
     floors: list[int]
     ceiling: int
-    base: int
-    wood: int
-    dark: int
-    steel: int
     fabric: int
     cover: int
     wardrobe: int
     sideboard: int
-    door: int
-    tv: int
-    pot: int
-    leaves: int
-    light: int
-    window: int
     ceiling_uv_m: float
 
 
@@ -630,20 +623,12 @@ def _materials(b: SceneBuilder, rng: np.random.Generator, plan: RoomPlan) -> _Ma
         walls=walls,
         floors=floors,
         ceiling=material(b, "ceiling", ceiling),
-        base=material(b, "baseboard", tx.metal(rng, 128, tint=(235, 235, 230))),
-        wood=material(b, "light_wood", tx.wood(rng, 1024, light=True)),
-        dark=material(b, "dark_wood", tx.wood(rng, 512, light=False)),
-        steel=material(b, "steel", tx.metal(rng, 256), specular=0.6, shininess=60),
+        **home_materials(b, rng),  # arguments are evaluated in order: the draws too
         fabric=material(b, "sofa_fabric", tx.fabric(rng)),
         cover=material(b, "bed_cover", tx.fabric(rng)),
         wardrobe=material(b, "wardrobe_doors", tx.cabinet_front(rng, 2, light=True)),
         sideboard=material(b, "sideboard_doors", tx.cabinet_front(rng, 3, 768, 384, light=False)),
-        door=material(b, "door", tx.door(rng)),
-        tv=material(b, "tv_black", tx.flat((30, 32, 36)), specular=0.8, shininess=100),
-        pot=material(b, "plant_pot", tx.flat((150, 80, 50))),
-        leaves=material(b, "leaves", tx.wallpaper(rng, (70, 115, 55), (35, 75, 30), 256)),
-        light=material(b, "ceiling_light", tx.flat((255, 252, 240)), emissive=True),
-        window=material(b, "window", tx.framed_picture(rng, 512, 384), emissive=True),
+        **home_fittings(b, rng),
         ceiling_uv_m=0.6 if tiles else 1.0,
     )
 
