@@ -50,7 +50,7 @@ lint: install
 	$(BIN)/snakemake --lint
 
 test: system-test lint
-	$(BIN)/python -m pytest -m "not hardware and not gpu" -n auto --maxprocesses 4 --dist loadfile --durations=25
+	$(BIN)/python -m pytest -m "not hardware and not gpu" -n auto --maxprocesses 4 --dist loadfile --no-loadscope-reorder --durations=25
 
 test-fast: install
 	$(BIN)/python -m pytest
