@@ -75,9 +75,10 @@ def _slow_files_first(items: list) -> None:
 
     With ``pytest -n 2 --dist loadfile --no-loadscope-reorder`` (the CI command; without the
     last option xdist hands out the files with the most tests first) a file is one unit of
-    work, handed out in this order: the minutes-long workflow tests start while the other worker drains the
-    many short files, instead of starting last with one worker idle beside them (longest
-    processing time first). Without xdist the order changes nothing but the order."""
+    work, handed out in this order: the minutes-long workflow tests start while the other
+    worker drains the many short files, instead of starting last with one worker idle beside
+    them (longest processing time first). Without xdist the order changes nothing but the
+    order."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.path not in slow_files)  # stable: keeps order within
 
