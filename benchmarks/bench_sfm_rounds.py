@@ -17,6 +17,11 @@ only).
         --campaign results/office --rounds 1 3 5 \\
         --variant default --variant register:register_new_photos=true --work /tmp/sfmr
 
+The cut keeps every pair among earlier photos that the database holds: a campaign made with
+the loop pairs before 2026-11-26 (spread over the whole set, moving each round) also holds the
+pairs among old photos that later rounds matched, so this under-counts what those rounds
+matched (their own ``report.json`` says it: ``pairs.matched_now``).
+
 The variants of one round run interleaved (all variants, then all again), so the machine's
 load falls on them alike; the table states the load beside each row.
 """
