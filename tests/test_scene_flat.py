@@ -63,16 +63,15 @@ def test_both_rooms_and_the_corridor_are_one_reachable_region(seed):
     assert not reach[on_partition].any()
 
 
-def test_a_capture_of_20_photos_runs_in_the_flat(tmp_path, monkeypatch, scene):
-    import scenebot.scene.loader as loader
+def test_a_capture_of_20_photos_runs_in_the_flat(tmp_path, scene):
     from scenebot.capture.stage import run_capture
     from scenebot.capturelog import photo_records
 
-    # until config.py lists "flat" in world.builtin, hand the scene to the capture directly
-    monkeypatch.setattr(loader, "load_world_scene", lambda world_cfg: flat(world_cfg.seed))
-    cfg = Config.model_validate(
-        {"sim": {"camera": {"width": 80, "height": 60}}, "exploration": {"photos": 20}}
-    )
+    cfg = Config.model_validate({
+        "world": {"builtin": "flat", "seed": 7},  # the scene fixture's
+        "sim": {"camera": {"width": 80, "height": 60}},
+        "exploration": {"photos": 20},
+    })  # fmt: skip
     summary = run_capture(cfg, tmp_path / "capture", progress=False)
     assert summary["photos"] == 20
     photos = photo_records(tmp_path / "capture" / "log.jsonl")
