@@ -102,25 +102,22 @@ def select_pairs(
     by_round: dict[int, list[int]] = {}
     for i, p in enumerate(priors):
         by_round.setdefault(p.round, []).append(i)
-    for members in by_round.values():
-        members = sorted(members, key=lambda i: priors[i].index)
+    ordered = {r: sorted(by_round[r], key=lambda i: priors[i].index) for r in sorted(by_round)}
+    for members in ordered.values():
         for a in range(len(members)):
             for b in range(a + 1, min(a + 1 + sequential_overlap, len(members))):
                 add("sequential", members[a], members[b])
 
     # loop closure: the first round's photos spread over that round, a later round's over
     # the rounds before it (fixed once the round is taken)
-    first = min(by_round)
-    for r in sorted(by_round):
-        members = sorted(by_round[r], key=lambda i: priors[i].index)
-        pool = (
-            members if r == first else [i for q in sorted(by_round) if q < r for i in by_round[q]]
-        )
+    earlier: list[int] = []
+    for r, members in ordered.items():
+        pool = earlier or members
         m = len(pool)
-        for a, i in enumerate(members):
+        for a, i in enumerate(members if m > 1 else []):
             for k in range(1, loop_closure_pairs + 1):
-                if m > 1:
-                    add("loop", i, pool[(a + (k * m) // (loop_closure_pairs + 1)) % m])
+                add("loop", i, pool[(a + (k * m) // (loop_closure_pairs + 1)) % m])
+        earlier = earlier + by_round[r]
 
     heading = np.array([np.nan if p.heading is None else p.heading for p in priors])
     frames: dict[str, list[int]] = {}
