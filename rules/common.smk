@@ -130,6 +130,17 @@ def previous_goals(wildcards):
     return [f"{prev}/goals.json", f"{prev}/freespace.npz"] if r > 0 else []
 
 
+def adaptive_logs_until(wildcards):
+    """The capture logs of the adaptive rounds 1..r: the goals stage avoids goals abandoned
+    there and stops a campaign stuck without photos (scenebot.goals.failures)."""
+    r = int(wildcards.r)
+    return (
+        []
+        if PHOTOS
+        else [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(1, r + 1)]
+    )
+
+
 def person_mesh(wildcards):
     """The round's mesh for the goals stage of a person's photos (its coverage picture:
     how many photos saw each part of the surface); a robot's goals do not read it."""

@@ -124,6 +124,7 @@ rule goals:
         freespace=f"{RESULTS}/round_{{r}}/freespace.npz",
         previous=previous_goals,
         mesh=person_mesh,
+        logs=adaptive_logs_until,
     output:
         goals=f"{RESULTS}/round_{{r}}/goals.json",
         picture=report(
@@ -146,6 +147,7 @@ rule goals:
             previous_goals_json=input.previous[:1],
             previous_freespace_npz=input.previous[1:],
             mesh_ply=input.mesh,
+            capture_logs=input.logs,
         ),
     shell:
         "{params.py:q} -m scenebot goals --params {params.cfg:q} --sfm-dir {params.sfm:q} "

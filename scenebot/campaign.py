@@ -126,6 +126,7 @@ def summarize(scene_dir: Path, rounds: list[int], max_rounds: int, reach_m: floa
             "mapping_mode": sfm.get("mapping_mode"),
             "best_remaining_score_deg": goals.get("best_score_deg"),
             "complete": goals.get("complete"),
+            "complete_because": goals.get("complete_because"),
             "goals_chosen": len(goals.get("goals", [])),
         }
         acc = _load(rd / "sfm" / "accuracy.json")
@@ -151,7 +152,10 @@ def summarize(scene_dir: Path, rounds: list[int], max_rounds: int, reach_m: floa
         out_rounds.append(entry)
     last = out_rounds[-1] if out_rounds else {}
     if last.get("complete"):
-        reason = f"round {last['round']}'s goals.json says the map is complete"
+        why = last.get("complete_because")
+        reason = f"round {last['round']}'s goals.json says the map is complete" + (
+            f": {why}" if why else ""
+        )
     elif len(rounds) >= max_rounds:
         reason = f"max_rounds = {max_rounds} reached"
     else:

@@ -54,7 +54,8 @@ STAGE_FILES = {
     "mesh": ("sfm_dir", "mesh_ply", "freespace_json", "freespace_npz", "freespace_png?"),
     "score": ("sfm_dir", "mesh_ply", "freespace_npz", "candidates_csv", "views_png?"),
     "goals": ("candidates_csv", "freespace_npz", "sfm_dir?", "previous_goals_json?",
-              "previous_freespace_npz?", "mesh_ply?", "goals_json", "goals_png?"),
+              "previous_freespace_npz?", "mesh_ply?", "capture_logs*", "goals_json",
+              "goals_png?"),
     "plan": ("sfm_dir", "goals_json", "navgrid_npz", "paths_json", "plot_png?"),
     "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png"),
 }  # fmt: skip

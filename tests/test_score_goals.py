@@ -248,14 +248,17 @@ def test_a_round_that_added_no_photo_shows_no_diminishing_returns(
     scored_room, tmp_path, previous_images, complete
 ):
     """A round whose goals were all missed added nothing to the map: its unchanged score is
-    no evidence that more photos would not help, so the campaign goes on."""
+    no evidence that more photos would not help, so the campaign goes on (the previous round
+    was low already: with goals.patience = 2 this one's low gain would end the campaign; one
+    idle round does not make it stuck either)."""
     mean, area = scored_room["doc"]["mean_score_deg"], scored_room["doc"]["free_area_m2"]
     prev = tmp_path / "round_000" / "goals.json"
     prev.parent.mkdir()
     prev.write_text(json.dumps({"mean_score_deg": 1.01 * mean, "free_area_m2": area,
-                                "map_images": previous_images}))  # fmt: skip
+                                "map_images": previous_images,
+                                "score_gain": {"low_rounds": 1}}))  # fmt: skip
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=1),
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=2),
         GoalsInputs(
             scored_room["so"].candidates_csv,
             scored_room["mo"].freespace_npz,
@@ -269,6 +272,97 @@ def test_a_round_that_added_no_photo_shows_no_diminishing_returns(
     assert ("not_applied" in doc["score_gain"]) is not complete
     if not complete:
         assert "added no photo" in doc["score_gain"]["not_applied"]
+        assert doc["idle"]["rounds"] == 1 and not doc["idle"]["stuck"]
+
+
+def _abandoned_log(path, goals):
+    """A capture log holding one goal_abandoned event per (x, y)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = [{"type": "session", "t": 0.0}]
+    for k, (x, y) in enumerate(goals):
+        lines.append(
+            {
+                "type": "event",
+                "event": "goal_abandoned",
+                "goal_index": k,
+                "goal": {"x": x, "y": y, "theta": 0.0},
+                "reason": "5 obstacles met on the way (max_obstacles = 5): no route",
+            }
+        )
+    path.write_text("\n".join(json.dumps(r) for r in lines) + "\n{torn", encoding="utf-8")
+    return path
+
+
+def test_goals_abandoned_in_earlier_rounds_are_not_chosen_again(scored_room, tmp_path):
+    """The first round's best goals, abandoned by the robot (its capture log): the next
+    choice keeps goals.nms_radius_m away from each of them, still picks k goals, says how
+    many candidates it avoided and draws the abandoned goals; the score and the stopping
+    rule are unchanged."""
+    first = scored_room["doc"]["goals"]
+    cfg = GoalsConfig(k=6, min_matchable_points=0)
+    log = _abandoned_log(tmp_path / "round_001" / "capture" / "log.jsonl",
+                         [(g["x"], g["y"]) for g in first[:3]])  # fmt: skip
+    doc = run_goals(
+        cfg,
+        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
+                    capture_logs=[log, tmp_path / "round_002" / "capture" / "log.jsonl"]),
+        GoalsOutputs(tmp_path / "goals.json", tmp_path / "goals.png"),
+    )  # fmt: skip
+    assert doc["avoided"]["abandoned_goals"] == 3 and doc["avoided"]["applied"]
+    assert doc["avoided"]["candidates"] >= 3
+    assert len(doc["goals"]) == len(first)
+    for g in doc["goals"]:
+        for a in first[:3]:
+            assert np.hypot(g["x"] - a["x"], g["y"] - a["y"]) > cfg.nms_radius_m
+    assert (tmp_path / "goals.png").stat().st_size > 0
+    assert doc["complete"] == scored_room["doc"]["complete"]
+
+
+def test_every_candidate_near_an_abandoned_goal_is_still_chosen_from(scored_room, tmp_path):
+    """An abandoned goal whose radius covers the whole room: avoiding it would leave no
+    candidate, so the goals are chosen as before (logged, avoided.applied false)."""
+    log = _abandoned_log(tmp_path / "round_001" / "capture" / "log.jsonl", [(0.0, 0.0)])
+    doc = run_goals(
+        GoalsConfig(k=6, min_matchable_points=0, nms_radius_m=20.0),
+        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
+                    capture_logs=[log]),
+        GoalsOutputs(tmp_path / "goals.json"),
+    )  # fmt: skip
+    assert doc["avoided"]["applied"] is False and doc["avoided"]["candidates"] > 0
+    assert doc["goals"]
+
+
+@pytest.mark.parametrize(("idle_before", "stuck"), [(0, False), (1, True)])
+def test_a_campaign_whose_rounds_add_no_photo_stops_as_stuck(
+    scored_room, tmp_path, idle_before, stuck
+):
+    """goals.patience rounds in a row without a new photo in the map: the campaign stops,
+    complete with the reason (the idle rounds and why the goals were abandoned), whatever
+    the score says; one idle round after a productive one does not stop it."""
+    prev = tmp_path / "round_002" / "goals.json"
+    prev.parent.mkdir()
+    prev.write_text(json.dumps({"map_images": 72, "idle": {"rounds": idle_before}}))
+    log = _abandoned_log(tmp_path / "round_003" / "capture" / "log.jsonl", [(9.0, 9.0)] * 4)
+    doc = run_goals(
+        GoalsConfig(k=6, patience=2, min_matchable_points=0),
+        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
+                    scored_room["root"] / "sfm", prev, capture_logs=[log]),
+        GoalsOutputs(tmp_path / "round_003" / "goals.json"),
+    )  # fmt: skip
+    assert doc["idle"]["rounds"] == idle_before + 1
+    assert doc["complete"] is stuck and doc.get("stuck", False) is stuck
+    if stuck:
+        why = doc["complete_because"]
+        assert why.startswith("stuck: 2 rounds in a row added no photo") and "4 (4 x 5 obst" in why
+    # a round that added photos resets the count
+    prev.write_text(json.dumps({"map_images": 60, "idle": {"rounds": 5}}))
+    doc = run_goals(
+        GoalsConfig(k=6, patience=2, min_matchable_points=0),
+        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
+                    scored_room["root"] / "sfm", prev, capture_logs=[log]),
+        GoalsOutputs(tmp_path / "round_003" / "goals.json"),
+    )  # fmt: skip
+    assert doc["idle"]["rounds"] == 0 and not doc.get("stuck")
 
 
 def _raster(x0, y0, x1, y1, origin=(-3.0, -3.0), res=0.05, shape=(140, 160), extra=()):

@@ -493,3 +493,61 @@ def test_the_robots_estimate_as_a_camera_pose(theta):
     assert np.allclose(pose.rotation.matrix(), R, atol=1e-12)
     assert np.allclose(pose.inverse().translation, c, atol=1e-12)
     assert camera_priors([Photo("b.jpg", Path("b.jpg"))], None, 0.0, 0.0) == {}
+
+
+def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_estimate():
+    """A camera 2 m from a papered wall whose pattern repeats every 1.2 m, so each pixel
+    matches the true wall point and its copy one repeat along (more of them: a copy seen
+    better). The robot's estimate is 0.3 m and 5 deg off the truth. RANSAC on all matches
+    settles on the copy (1.2 m off); pose_near_estimate gives the true pose (< 2 cm); matches
+    behind the camera never pass the gate; an estimate next to the copy gives the copy's
+    pose, not the truth; no pose when the tolerances exclude every copy."""
+    import math
+
+    import pycolmap
+
+    from scenebot.sfm.register import _Tolerance, gate_correspondences, pose_near_estimate
+
+    cam = pycolmap.Camera.create_from_model_name(1, "PINHOLE", 500.0, 640, 480)
+
+    def level(x: float, y: float, heading_deg: float) -> pycolmap.Rigid3d:
+        h = math.radians(heading_deg)
+        view = np.array([math.cos(h), math.sin(h), 0.0])
+        right = np.array([math.sin(h), -math.cos(h), 0.0])
+        rot = np.stack([right, [0.0, 0.0, -1.0], view])
+        return pycolmap.Rigid3d(pycolmap.Rotation3d(rot), -rot @ np.array([x, y, 0.3]))
+
+    def centre(pose):
+        return -pose.rotation.matrix().T @ np.asarray(pose.translation)
+
+    truth, prior = level(0.0, 0.0, 0.0), level(0.3, 0.1, 5.0)
+    rng = np.random.default_rng(0)
+    n_true, n_copy = 120, 200
+    wall = np.c_[
+        np.full(n_copy, 2.0), rng.uniform(-0.9, 0.9, n_copy), rng.uniform(-0.3, 0.9, n_copy)
+    ]
+    px = cam.img_from_cam(truth * wall) + rng.normal(0, 0.5, (n_copy, 2))
+    copy = wall + [0.0, 1.2, 0.0]  # the same pattern one repeat along the wall
+    xy = np.vstack([px[:n_true], px])
+    xyz = np.vstack([wall[:n_true], copy])
+    est = pycolmap.AbsolutePoseEstimationOptions()
+    est.ransac.random_seed = 0
+    plain = pycolmap.estimate_and_refine_absolute_pose(xy, xyz, cam, est)["cam_from_world"]
+    assert np.linalg.norm(centre(plain) - centre(truth)) > 1.0
+    tol = _Tolerance(0.5, 12.0)
+    pose = pose_near_estimate(cam, prior, xy, xyz, tol, 4.0, 30)
+    assert pose is not None and np.linalg.norm(centre(pose) - centre(truth)) < 0.02
+    near_copy = level(0.2, 1.3, 3.0)
+    pose = pose_near_estimate(cam, near_copy, xy, xyz, tol, 4.0, 30)
+    assert pose is not None and np.linalg.norm(centre(pose) - centre(plain)) < 0.05
+    assert (
+        pose_near_estimate(cam, level(0.0, 3.0, 0.0), xy, xyz, _Tolerance(0.3, 5.0), 4.0, 30)
+        is None
+    )
+    behind = wall * [-1.0, 1.0, 1.0]
+    assert not gate_correspondences(cam, prior, px, behind, 0.5, 12.0).any()
+    assert gate_correspondences(cam, prior, px, wall, 0.5, 12.0).all()
+    assert gate_correspondences(cam, prior, px[:0], wall[:0], 0.5, 12.0).shape == (0,)
+    assert tol.agrees(truth, prior) and not tol.agrees(level(0.0, 1.2, 0.0), prior)
+    assert not tol.agrees(level(0.3, 0.1, 25.0), prior)
+    assert _Tolerance(0.0, 0.0).agrees(level(5.0, 5.0, 90.0), prior)  # off

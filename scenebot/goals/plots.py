@@ -19,9 +19,11 @@ def plot_goals(
     score: np.ndarray,
     goals: np.ndarray,
     title: str,
+    abandoned: list[dict] | None = None,
 ) -> None:
     """Score heat map over the free space (candidate positions coloured by view score, degrees)
-    with the chosen goals as arrows along their headings."""
+    with the chosen goals as arrows along their headings, and the goals abandoned in earlier
+    rounds (their surroundings not chosen again) as red crosses."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 6))
     draw_freespace(ax, fs)
@@ -38,6 +40,11 @@ def plot_goals(
             arrowprops={"arrowstyle": "-|>", "color": "cyan", "lw": 2},
         )
         ax.text(x, y, str(r), color="cyan", fontsize=9, ha="right", va="top")
+    if abandoned:
+        xy = np.array([[a["x"], a["y"]] for a in abandoned])
+        ax.scatter(xy[:, 0], xy[:, 1], marker="X", s=90, color="red", ec="k", zorder=5,
+                   label=f"abandoned in earlier rounds ({len(xy)})")  # fmt: skip
+        ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +13,7 @@ from scenebot.artifacts.candidates import read_candidates
 from scenebot.artifacts.freespace import FreeSpace, FreeSpaceError
 from scenebot.geometry import read_sparse_map
 from scenebot.goals.config import GoalsConfig
+from scenebot.goals.failures import abandoned_goals, idle_rounds, near_abandoned
 from scenebot.goals.select import goals_document, select_goals, write_goals
 from scenebot.goals.stopping import apply_stopping_rule, diminishing_returns
 
@@ -29,6 +30,9 @@ class GoalsInputs:
     previous_goals_json: Path | None = None  # the previous round's (diminishing returns)
     previous_freespace_npz: Path | None = None  # the previous round's (its new free space)
     mesh_ply: Path | None = None  # the map's surface: a person's coverage picture needs it
+    # the capture logs of the adaptive rounds so far (goals abandoned there are not chosen
+    # again; rounds that added no photo make the campaign stuck: scenebot.goals.failures)
+    capture_logs: list[Path] = field(default_factory=list)
 
 
 @dataclass
@@ -75,9 +79,12 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
             "and goals.min_matchable_points = %d map points; goals ignore the overlap this "
             "round", where, cfg.min_seen_fraction, cfg.min_matchable_points,
         )  # fmt: skip
-    score = np.where(valid, cols["score_deg"], np.nan)
+    abandoned = abandoned_goals(inputs.capture_logs)
     if cfg.method == "frontier":
-        return _frontier_goals(cfg, inputs, outputs, fs, score, where)
+        score = np.where(valid, cols["score_deg"], np.nan)
+        return _frontier_goals(cfg, inputs, outputs, fs, score, where, abandoned)
+    avoided = _avoid_abandoned(valid, poses, abandoned, cfg.nms_radius_m, where)
+    score = np.where(valid, cols["score_deg"], np.nan)
     ranked = select_goals(
         poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
     )
@@ -111,9 +118,12 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
             "free_area_m2": round(fs.area_m2, 4),
             "map_images": map_images,
             "score_gain": returns,
+            "avoided": avoided,
         },
     )
     apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
+    _apply_stuck(doc, idle_rounds(map_images, inputs.previous_goals_json, abandoned,
+                                  cfg.patience))  # fmt: skip
     if doc["complete"]:
         log.info("%s: exploration complete: %s", where, doc["complete_because"])
     # next in rank, for the planner to use in place of a goal it cannot route to
@@ -124,8 +134,34 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
         from scenebot.goals.plots import plot_goals
 
         title = f"{where}: goals (complete={doc['complete']})"
-        plot_goals(outputs.goals_png, fs, poses, score, chosen, title)
+        plot_goals(outputs.goals_png, fs, poses, score, chosen, title, abandoned)
     return doc
+
+
+def _avoid_abandoned(valid: np.ndarray, poses: np.ndarray, abandoned: list[dict],
+                     radius_m: float, where: str) -> dict:  # fmt: skip
+    """Take the candidates near goals abandoned in earlier rounds out of ``valid`` (in place;
+    not when that leaves none, logged). Returns goals.json's ``avoided``."""
+    near = near_abandoned(poses[:, :2], abandoned, radius_m) & valid
+    applied = bool(near.any() and (valid & ~near).any())
+    if applied:
+        valid &= ~near
+    elif near.any():
+        log.warning(
+            "%s: every valid candidate lies within goals.nms_radius_m = %g m of a goal "
+            "abandoned in an earlier round; choosing among them anyway", where, radius_m,
+        )  # fmt: skip
+    return {"abandoned_goals": len(abandoned), "candidates": int(near.sum()),
+            "applied": applied, "radius_m": radius_m}  # fmt: skip
+
+
+def _apply_stuck(doc: dict, idle: dict | None) -> None:
+    """goals.json's ``idle``; a stuck campaign stops (``complete`` with the reason)."""
+    doc["idle"] = idle
+    if idle and idle["stuck"] and not doc["complete"]:
+        doc["complete"] = True
+        doc["stuck"] = True
+        doc["complete_because"] = idle["reason"]
 
 
 def _registered_images(sfm_dir: Path | None) -> int | None:
@@ -148,11 +184,12 @@ def _goal_record(rank: int, g: dict) -> dict:
 
 
 def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, fs: FreeSpace,
-                    score: np.ndarray, where: str) -> dict:  # fmt: skip
+                    score: np.ndarray, where: str, abandoned: list[dict]) -> dict:  # fmt: skip
     """The frontier baseline (``goals.method: frontier``): see :mod:`scenebot.goals.frontier`.
 
     The candidates' scores are still reported (``best_score_deg``) so campaigns compare, but
-    they choose nothing; the map is complete when no frontier is left.
+    they choose nothing; the map is complete when no frontier is left, or the campaign is
+    stuck (:func:`scenebot.goals.failures.idle_rounds`, as for the score's goals).
     """
     from scenebot.geometry import read_map_geometry
     from scenebot.goals.frontier import frontier_cells, frontier_goals, seen_cells
@@ -178,8 +215,13 @@ def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs
         "n_candidates": len(score),
         "pose_convention": "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)",
         "seen_free_fraction": float(seen.sum() / max(fs.mask.sum(), 1)),
+        "map_images": len(centres),
         "goals": [_goal_record(r, g) for r, g in enumerate(goals)],
     }
+    if doc["complete"]:
+        doc["complete_because"] = "no frontier left"
+    _apply_stuck(doc, idle_rounds(len(centres), inputs.previous_goals_json, abandoned,
+                                  cfg.patience))  # fmt: skip
     write_goals(outputs.goals_json, doc)
     if outputs.goals_png is not None:
         from scenebot.goals.plots import plot_frontier

@@ -12,6 +12,8 @@ A round's map is **complete**, and the campaign takes no more rounds, when eithe
    round that added no photo to the map measured nothing and does not count.
 
 With ``goals.method: frontier`` (the baseline) the map is complete when no frontier is left.
+Either way a campaign whose last ``goals.patience`` rounds added no photo to the map stops as
+*stuck*, saying why (:mod:`scenebot.goals.failures`).
 Whatever the rule says, the campaign stops after ``max_rounds`` rounds (``campaign.json``
 says which of these stopped it).
 """

@@ -14,6 +14,15 @@ them within ``sfm.refine_max_error_px`` is kept. Far walls seen at one depth let
 (office round 6: two photos 29 and 42 cm off, 1.0-1.9 px median error; refined from the
 robot's estimate 1.3 cm off, 0.3-0.5 px).
 
+A pose that contradicts the robot's estimate (camera centre farther than
+``sfm.max_estimate_deviation_m``, or heading farther than ``sfm.max_compass_deviation_deg``:
+the tolerances by which the stage leaves such photos out of the map anyway) is estimated again
+from the photo's matches that the estimate allows (:func:`gate_correspondences`): repeating
+wallpaper and parquet give a photo matches to the pattern's other copies, and RANSAC can
+settle on a copy metres away (the flat, round 3: 20 of 26 new photos registered, 15 of them
+1-3 m off). Is the gated pose within the tolerances, it replaces the first; otherwise the photo
+is taken out of the map again before its points are triangulated.
+
 Then the new photos get the robust refinement the whole map gets on the slow path (drop
 observations beyond ``sfm.refine_max_error_px``, bundle adjustment with a Cauchy loss), but
 only over the new photos and the points they see. No global bundle adjustment runs here:
@@ -55,12 +64,15 @@ class Registration:
         new_ids: image ids of the photos registered now.
         previous_ids: image ids of the previous model's photos (poses held).
         stats: counts and seconds per step (report.json ``refinement``).
+        rejected: photo name -> why it was taken out again (its pose against the robot's
+            estimate).
     """
 
     reconstruction: pycolmap.Reconstruction
     new_ids: list[int]
     previous_ids: set[int]
     stats: dict = field(default_factory=dict)
+    rejected: dict[str, str] = field(default_factory=dict)
 
 
 def map_new_photos(
@@ -113,7 +125,7 @@ def map_new_photos(
         rec,
         "registered",
         1,
-        dropped_photos(db_path, names, [rec], cfg),
+        dropped_photos(db_path, names, [rec], cfg) | reg.rejected,
         time.perf_counter() - t0,
         refinement,
         new_ids=reg.new_ids,
@@ -194,7 +206,14 @@ def register_new_photos(
     mopts.abs_pose_refine_extra_params = False
     mapper = pycolmap.IncrementalMapper(cache)
     mapper.begin_reconstruction(rec)
-    guess = _PriorGuess(mapper, cache.correspondence_graph, priors, cfg.refine_max_error_px)
+    guess = _PriorGuess(
+        mapper,
+        cache.correspondence_graph,
+        priors,
+        cfg.refine_max_error_px,
+        _Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg),
+        mopts.abs_pose_min_num_inliers,
+    )
     new_ids = _register_loop(mapper, opts, mopts, guess)
     mapper.end_reconstruction(False)
     for iid in new_ids:
@@ -202,16 +221,56 @@ def register_new_photos(
     stats = {
         "registered_now": len(new_ids),
         "poses_from_robot_estimate": guess.taken,
+        "poses_from_gated_matches": guess.gated,
+        "rejected_against_robot_estimate": len(guess.rejected),
         "register_seconds": time.perf_counter() - t0,
     }
-    return Registration(rec, new_ids, previous_ids, stats)
+    return Registration(rec, new_ids, previous_ids, stats, dict(guess.rejected_names))
+
+
+@dataclass(frozen=True)
+class _Tolerance:
+    """How far a registered pose may lie from the robot's estimate: camera centre (m,
+    horizontal) and heading (deg); 0 or less: not checked."""
+
+    position_m: float
+    heading_deg: float
+
+    def agrees(self, pose: pycolmap.Rigid3d, prior: pycolmap.Rigid3d) -> bool:
+        """Whether ``pose`` lies within the tolerances of ``prior`` (both cam_from_world)."""
+        if self.position_m > 0:
+            d = np.linalg.norm((_centre(pose) - _centre(prior))[:2])
+            if d > self.position_m:
+                return False
+        if self.heading_deg > 0:
+            dh = abs(math.degrees(_wrap(_heading(pose) - _heading(prior))))
+            if dh > self.heading_deg:
+                return False
+        return True
+
+
+def _centre(pose: pycolmap.Rigid3d) -> np.ndarray:
+    return -pose.rotation.matrix().T @ np.asarray(pose.translation)
+
+
+def _heading(pose: pycolmap.Rigid3d) -> float:
+    view = pose.rotation.matrix()[2]
+    return math.atan2(view[1], view[0])
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 class _PriorGuess:
-    """The robot's estimate of a just registered photo's pose as a second initial guess.
+    """The robot's estimate of a just registered photo's pose: a second initial guess, and a
+    check (:meth:`check`).
 
     Attributes:
         taken: how many photos kept the pose refined from the robot's estimate.
+        gated: how many photos took the pose estimated from their gated matches.
+        rejected: image ids taken out again (no pose within the tolerances).
+        rejected_names: their names -> why.
     """
 
     def __init__(
@@ -220,10 +279,63 @@ class _PriorGuess:
         graph: pycolmap.CorrespondenceGraph,
         priors: dict[str, pycolmap.Rigid3d],
         max_error_px: float,
+        tolerance: _Tolerance | None = None,
+        min_inliers: int = 30,
     ) -> None:
         self.mapper, self.graph, self.priors = mapper, graph, priors
         self.max_error_px = max_error_px
+        self.tolerance = tolerance or _Tolerance(0.0, 0.0)
+        self.min_inliers = min_inliers
         self.taken = 0
+        self.gated = 0
+        self.rejected: set[int] = set()
+        self.rejected_names: dict[str, str] = {}
+
+    def check(self, iid: int, drop_error_px: float, max_error_px: float) -> bool:
+        """Hold image ``iid``'s new pose against the robot's estimate: within the
+        tolerances, try the estimate as a second initial guess (:meth:`try_pose`); beyond
+        them, estimate the pose again from the matches the estimate allows (RANSAC at
+        ``max_error_px``, :func:`gate_correspondences`) and take it when it lies within the
+        tolerances, else take the photo out of the map. Returns whether it stays."""
+        rec = self.mapper.reconstruction
+        im = rec.image(iid)
+        prior = self.priors.get(im.name)
+        if prior is None or self.tolerance.agrees(im.cam_from_world(), prior):
+            self.try_pose(iid, drop_error_px)
+            return True
+        pose = self._gated_pose(iid, prior, max_error_px)
+        if pose is not None:
+            self._set_pose(iid, pose, drop_error_px)
+            self.gated += 1
+            return True
+        d = float(np.linalg.norm((_centre(im.cam_from_world()) - _centre(prior))[:2]))
+        self.mapper.observation_manager.deregister_frame(im.frame_id)
+        self.rejected.add(iid)
+        self.rejected_names[im.name] = (
+            f"registered {d:.2f} m from the robot's own estimate, and its matches that the "
+            "estimate allows give no pose within sfm.max_estimate_deviation_m / "
+            "sfm.max_compass_deviation_deg"
+        )
+        return False
+
+    def _gated_pose(
+        self, iid: int, prior: pycolmap.Rigid3d, max_error_px: float
+    ) -> pycolmap.Rigid3d | None:
+        rec = self.mapper.reconstruction
+        im = rec.image(iid)
+        _, xy, xyz = map_correspondences(rec, self.graph, iid, every=True)
+        return pose_near_estimate(
+            im.camera, prior, xy, xyz, self.tolerance, max_error_px, self.min_inliers
+        )
+
+    def _set_pose(self, iid: int, pose: pycolmap.Rigid3d, drop_error_px: float) -> None:
+        """Give image ``iid`` ``pose`` and drop its observations it puts beyond
+        ``drop_error_px`` (triangulation then continues its tracks from the new pose)."""
+        rec = self.mapper.reconstruction
+        rec.frame(rec.image(iid).frame_id).rig_from_world = pose
+        table = ObservationTable(rec, [iid])
+        for k in table.point2D_idx[~(table.errors(rec) <= drop_error_px)]:
+            self.mapper.observation_manager.delete_observation(iid, int(k))
 
     def try_pose(self, iid: int, drop_error_px: float) -> bool:
         """Refine the pose of image ``iid`` from its prior on all its matches to map
@@ -248,33 +360,105 @@ class _PriorGuess:
         errors = [_errors(im.camera, p, xy, xyz) for p in (im.cam_from_world(), pose)]
         if np.sum(errors[1] <= self.max_error_px) <= np.sum(errors[0] <= self.max_error_px):
             return False
-        rec.frame(im.frame_id).rig_from_world = pose
-        table = ObservationTable(rec, [iid])
-        for k in table.point2D_idx[~(table.errors(rec) <= drop_error_px)]:
-            self.mapper.observation_manager.delete_observation(iid, int(k))
+        self._set_pose(iid, pose, drop_error_px)
         self.taken += 1
         return True
 
 
+def pose_near_estimate(
+    camera: pycolmap.Camera,
+    prior: pycolmap.Rigid3d,
+    xy: np.ndarray,
+    xyz: np.ndarray,
+    tolerance: _Tolerance,
+    max_error_px: float,
+    min_inliers: int,
+    attempts: int = 3,
+) -> pycolmap.Rigid3d | None:
+    """A pose within ``tolerance`` of the robot's estimate from the 2D-3D matches it allows
+    (:func:`gate_correspondences`): RANSAC (``max_error_px``), and while its pose lies
+    outside the tolerances, again without that pose's inliers (a repeated pattern gives
+    several consistent poses, one per copy; the estimate says which copy), ``attempts``
+    times at most. None when no pose with ``min_inliers`` inliers lies within them."""
+    keep = gate_correspondences(camera, prior, xy, xyz, tolerance.position_m, tolerance.heading_deg)
+    xy, xyz = np.asarray(xy)[keep], np.asarray(xyz)[keep]
+    est = pycolmap.AbsolutePoseEstimationOptions()
+    est.ransac.max_error = max_error_px
+    est.ransac.random_seed = 0
+    for _ in range(attempts):
+        if len(xy) < min_inliers:
+            return None
+        ans = pycolmap.estimate_and_refine_absolute_pose(xy, xyz, camera, est)
+        if ans is None or ans["num_inliers"] < min_inliers:
+            return None
+        if tolerance.agrees(ans["cam_from_world"], prior):
+            return ans["cam_from_world"]
+        out = ~np.asarray(ans["inlier_mask"], bool)
+        xy, xyz = xy[out], xyz[out]
+    return None
+
+
+def gate_correspondences(
+    camera: pycolmap.Camera,
+    prior: pycolmap.Rigid3d,
+    xy: np.ndarray,
+    xyz: np.ndarray,
+    position_m: float,
+    angle_deg: float,
+) -> np.ndarray:
+    """Which 2D-3D matches a camera near ``prior`` could have made: the 3D point lies within
+    ``position_m + depth * sin(angle_deg)`` of the prior's ray through the pixel (a camera
+    centre up to ``position_m`` away, its orientation up to ``angle_deg`` off), in front of
+    the camera. A copy of a repeated pattern elsewhere in the room fails this.
+
+    Args:
+        camera: the photo's camera (intrinsics).
+        prior: the robot's estimate (cam_from_world).
+        xy: (M, 2) pixel positions; xyz: (M, 3) their 3D points (map frame).
+        position_m, angle_deg: the tolerances (0 or less: 0).
+
+    Returns:
+        (M,) bool.
+    """
+    if not len(xy):
+        return np.zeros(0, bool)
+    rays = camera.cam_from_img(np.asarray(xy, np.float64))
+    rays = np.c_[rays, np.ones(len(rays))]
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    p = prior * np.asarray(xyz, np.float64)  # points in the prior camera's frame
+    along = np.sum(p * rays, axis=1)
+    off = np.linalg.norm(p - along[:, None] * rays, axis=1)
+    depth = np.linalg.norm(p, axis=1)
+    allowed = max(position_m, 0.0) + depth * math.sin(math.radians(max(angle_deg, 0.0)))
+    return (along > 0) & (off <= allowed)
+
+
 def map_correspondences(
-    rec: pycolmap.Reconstruction, graph: pycolmap.CorrespondenceGraph, iid: int
+    rec: pycolmap.Reconstruction,
+    graph: pycolmap.CorrespondenceGraph,
+    iid: int,
+    every: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The matches of image ``iid``'s points to 3D points of ``rec`` (through the
     correspondences with registered images' observations): point2D indices (M,), their
-    pixel positions (M, 2) and the 3D points (M, 3); one per 2D point (its first)."""
+    pixel positions (M, 2) and the 3D points (M, 3); one per 2D point (its first), or with
+    ``every`` each distinct 3D point a 2D point matches."""
     im = rec.image(iid)
     idx, xy, xyz = [], [], []
     for k in range(im.num_points2D()):
+        seen: set[int] = set()
         for c in graph.extract_correspondences(iid, k):
             other = rec.image(c.image_id) if rec.exists_image(c.image_id) else None
             if other is None or not other.has_pose:
                 continue
             p2 = other.point2D(c.point2D_idx)
-            if p2.has_point3D():
+            if p2.has_point3D() and p2.point3D_id not in seen:
+                seen.add(p2.point3D_id)
                 idx.append(k)
                 xy.append(im.point2D(k).xy)
                 xyz.append(rec.point3D(p2.point3D_id).xyz)
-                break
+                if not every:
+                    break
     return np.array(idx, np.int64), np.array(xy).reshape(-1, 2), np.array(xyz).reshape(-1, 3)
 
 
@@ -296,8 +480,9 @@ def _register_loop(
 ) -> list[int]:
     """Register the next best image while one registers (COLMAP's order: most visible map
     points first; structure-less resectioning when none registers from map points), try
-    the robot's estimate as a second initial pose (:class:`_PriorGuess`), triangulate it
-    and adjust it locally. Returns the ids registered, in order."""
+    the robot's estimate as a second initial pose and check the pose against it
+    (:class:`_PriorGuess`), triangulate it and adjust it locally. Returns the ids
+    registered, in order (not those taken out again by the check)."""
     tri = opts.get_triangulation()
     local_ba = opts.get_local_bundle_adjustment()
     local_ba.refine_focal_length = False
@@ -305,11 +490,14 @@ def _register_loop(
     local_ba.refine_principal_point = False
     new_ids: list[int] = []
     while True:
-        iid = _register_next(mapper, mopts, opts.structure_less_registration_fallback)
+        iid = _register_next(
+            mapper, mopts, opts.structure_less_registration_fallback, guess.rejected
+        )
         if iid is None:
             return new_ids
+        if not guess.check(iid, mopts.filter_max_reproj_error, mopts.abs_pose_max_error):
+            continue
         new_ids.append(iid)
-        guess.try_pose(iid, mopts.filter_max_reproj_error)
         mapper.triangulate_image(tri, iid)
         mapper.iterative_local_refinement(
             opts.ba_local_max_refinements,
@@ -325,14 +513,16 @@ def _register_next(
     mapper: pycolmap.IncrementalMapper,
     mopts: pycolmap.IncrementalMapperOptions,
     structure_less: bool,
+    skip: set[int] = frozenset(),
 ) -> int | None:
-    """Register the first candidate that registers; its id, or None when none does."""
+    """Register the first candidate (not in ``skip``) that registers; its id, or None when
+    none does."""
     for iid in mapper.find_next_images(mopts, False):
-        if mapper.register_next_image(mopts, iid):
+        if iid not in skip and mapper.register_next_image(mopts, iid):
             return iid
     if structure_less:
         for iid in mapper.find_next_images(mopts, True):
-            if mapper.register_next_structure_less_image(mopts, iid):
+            if iid not in skip and mapper.register_next_structure_less_image(mopts, iid):
                 return iid
     return None
 
