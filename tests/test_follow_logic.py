@@ -373,6 +373,34 @@ def test_two_agreeing_fixes_override_a_wrong_initial_pose(tmp_path):
     assert res.failed_localizations >= 1
 
 
+@pytest.mark.parametrize(("turn_deg", "taken"), [(5.0, False), (40.0, True)])
+def test_agreeing_fixes_override_the_prediction_only_from_different_views(
+    tmp_path, turn_deg, taken
+):
+    """The robot knows where it is (initial pose = truth); a repeated texture then gives two
+    confident fixes 2.4 m off that agree with each other. Taken a few degrees apart (one view
+    of one wall) they do not override the odometry prediction; after a turn of
+    follow.override_min_turn_deg or more they do (the prediction could be the wrong one)."""
+    robot = KinematicRobot((0.5, 0.5, 0.0), turn_slip=0.0)
+    loc = AliasingLocalizer(robot, wrong=lambda k: True, shift=(2.4, 0.0))
+    f = PathFollower(
+        robot,
+        NullCamera(),
+        loc,
+        GridPlanner(_open_grid(), SIMPLIFY),
+        FollowConfig(camera_forward_m=CAM_FWD, compass_gate_deg=0.0),
+        tmp_path,
+        initial_pose=Pose2D(0.5, 0.5, 0.0),
+    )
+    first = f.localize_photo(tmp_path / "a.jpg", robot.sense().odometry)
+    assert isinstance(first, LocalizationFailure)
+    assert first.reason == FailureReason.INCONSISTENT_WITH_ODOMETRY
+    robot.turn(math.radians(turn_deg))
+    second = f.localize_photo(tmp_path / "b.jpg", robot.sense().odometry)
+    assert isinstance(second, PoseEstimate) is taken
+    assert (math.hypot(f.pose.x - 0.5, f.pose.y - 0.5) > 2.0) is taken
+
+
 class MirrorLocalizer(OracleLocalizer):
     """From call ``start`` on, confident fixes turned by 180 degrees and moved (the same
     texture seen from the other side of the room): consecutive ones agree with each other."""

@@ -14,7 +14,7 @@ localize (too few matches or inliers, or a pose that is not that of a level came
 robot) leaves the odometry estimate in charge; the next motion is followed by another attempt,
 and at the goal the robot turns in place to look elsewhere before retrying. A fix that jumps
 far from the odometry prediction (repeated textures can give confident wrong poses) is
-rejected unless the next fix agrees with it (``gate_m``, ``gate_deg``). A goal counts as
+rejected unless the next fix, taken after a turn of ``override_min_turn_deg`` or more (another view), agrees with it (``gate_m``, ``gate_deg``). A goal counts as
 reached only on a *confirmed* fix: a second fix, taken from the same spot after a turn in place
 (a different view of the map), must agree with the first within ``confirm_m``. One wrong fix in
 a poorly textured corner then cannot end the approach ``goal_reached_m`` off; when no second
@@ -334,7 +334,8 @@ class PathFollower:
 
     def _consistent(self, cand: Pose2D, odo: Pose2D) -> bool:
         """Whether a fix agrees with the odometry prediction, or with the last rejected fix
-        carried forward by odometry (two agreeing fixes override the prediction)."""
+        carried forward by odometry when the robot turned by ``override_min_turn_deg`` or
+        more since (two agreeing fixes of different views override the prediction)."""
         cfg = self.cfg
         allowed = cfg.gate_m + cfg.gate_per_m * self._since_fix_m
         if not math.isfinite(allowed):
@@ -348,7 +349,10 @@ class PathFollower:
             return True
         if self._rejected is not None:
             prev, prev_odo = self._rejected
-            return close(cand, compose_odometry(prev, prev_odo, odo), cfg.gate_m)
+            turned = abs(math.degrees(wrap_angle(odo.theta - prev_odo.theta)))
+            return turned >= cfg.override_min_turn_deg and close(
+                cand, compose_odometry(prev, prev_odo, odo), cfg.gate_m
+            )
         return False
 
     def _confirmed_here(self) -> bool:
