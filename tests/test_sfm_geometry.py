@@ -527,7 +527,7 @@ def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_es
         np.full(n_copy, 2.0), rng.uniform(-0.9, 0.9, n_copy), rng.uniform(-0.3, 0.9, n_copy)
     ]
     px = cam.img_from_cam(truth * wall) + rng.normal(0, 0.5, (n_copy, 2))
-    copy = wall + [0.0, 1.2, 0.0]  # the same pattern one repeat along the wall
+    copy = wall + np.array([0.0, 1.2, 0.0])  # the same pattern one repeat along the wall
     xy = np.vstack([px[:n_true], px])
     xyz = np.vstack([wall[:n_true], copy])
     est = pycolmap.AbsolutePoseEstimationOptions()
@@ -544,7 +544,7 @@ def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_es
         pose_near_estimate(cam, level(0.0, 3.0, 0.0), xy, xyz, _Tolerance(0.3, 5.0), 4.0, 30)
         is None
     )
-    behind = wall * [-1.0, 1.0, 1.0]
+    behind = wall * np.array([-1.0, 1.0, 1.0])
     assert not gate_correspondences(cam, prior, px, behind, 0.5, 12.0).any()
     assert gate_correspondences(cam, prior, px, wall, 0.5, 12.0).all()
     assert gate_correspondences(cam, prior, px[:0], wall[:0], 0.5, 12.0).shape == (0,)
