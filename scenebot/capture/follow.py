@@ -14,7 +14,8 @@ localize (too few matches or inliers, or a pose that is not that of a level came
 robot) leaves the odometry estimate in charge; the next motion is followed by another attempt,
 and at the goal the robot turns in place to look elsewhere before retrying. A fix that jumps
 far from the odometry prediction (repeated textures can give confident wrong poses) is
-rejected unless the next fix, taken after a turn of ``override_min_turn_deg`` or more (another view), agrees with it (``gate_m``, ``gate_deg``). A goal counts as
+rejected unless the next fix, taken after a turn of ``override_min_turn_deg`` or more (another
+view), agrees with it (``gate_m``, ``gate_deg``). A goal counts as
 reached only on a *confirmed* fix: a second fix, taken from the same spot after a turn in place
 (a different view of the map), must agree with the first within ``confirm_m``. One wrong fix in
 a poorly textured corner then cannot end the approach ``goal_reached_m`` off; when no second
