@@ -39,6 +39,8 @@ SCENE = CFG.scene
 RESULTS = f"results/{SCENE}"
 PKG = Path(workflow.basedir) / "scenebot"
 MODEL_FILES = ["cameras.bin", "images.bin", "points3D.bin"]
+# the guide page's styles and script, copied into every page (not Python: not in stage_code)
+GUIDE_ASSETS = sorted(str(p) for p in (PKG / "guide" / "assets").glob("*.*"))
 
 
 # The code each stage runs: a change re-runs exactly the stages that use it. The captures are
@@ -102,6 +104,7 @@ def round_products(wildcards):
         files += [f"{d}/{f}" for f in ("goals.json", "goals.png")]
         if PHOTOS:  # each advised shot rendered from the photos (rule goals_preview)
             files.append(f"{d}/goals_preview.png")
+            files.append(f"{d}/guide/index.html")  # the person's guide page (rule guide)
         if not PHOTOS:  # a person's photos: no robot to plan paths for
             files += [f"{d}/{f}" for f in ("paths.json", "navgrid.png")]
     return files

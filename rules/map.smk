@@ -172,6 +172,7 @@ rule goals_preview:
             category="3. Decisions",
             subcategory="round {r}",
         ),
+        tiles=f"{RESULTS}/round_{{r}}/goals_preview.npz",  # the previews, for the guide page
     log:
         f"{RESULTS}/logs/round_{{r}}/goals_preview.log",
     benchmark:
@@ -188,6 +189,46 @@ rule goals_preview:
         "{params.py:q} -m scenebot goals-preview --params {params.cfg:q} "
         "--sfm-dir {params.sfm:q} --image-dir {params.images:q} "
         "--goals-json {input.goals:q} --preview-png {output.picture:q} "
+        "--preview-npz {output.tiles:q} 2> >(tee {log:q} >&2)"
+
+
+# robot: photos: the guide page of the round (round_XXX/guide/index.html, static, every asset
+# inline): the map from above and the side with the next shots as frusta, per shot its
+# preview, the photo to start from and the step from there, the predicted gain; the coverage
+# picture. `scenebot guide serve` shows it on a phone and takes the photos back.
+rule guide:
+    input:
+        code=stage_code("guide-page"),
+        assets=GUIDE_ASSETS,
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+        report=f"{RESULTS}/round_{{r}}/sfm/report.json",
+        goals=f"{RESULTS}/round_{{r}}/goals.json",
+        previews=f"{RESULTS}/round_{{r}}/goals_preview.npz",
+        coverage=f"{RESULTS}/round_{{r}}/goals.png",
+        photos=captures_until,
+    output:
+        page=report(
+            f"{RESULTS}/round_{{r}}/guide/index.html",
+            caption="../report/guide.rst",
+            category="3. Decisions",
+            subcategory="round {r}",
+        ),
+    log:
+        f"{RESULTS}/logs/round_{{r}}/guide.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/guide.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("guide"),
+        sfm=lambda w, input: Path(input.model[0]).parent,
+        images=lambda w: image_root(RESULTS),
+    shell:
+        "{params.py:q} -m scenebot guide page --params {params.cfg:q} "
+        "--sfm-dir {params.sfm:q} --image-dir {params.images:q} "
+        "--goals-json {input.goals:q} --preview-npz {input.previews:q} "
+        "--coverage-png {input.coverage:q} --guide-html {output.page:q} "
         "2> >(tee {log:q} >&2)"
 
 

@@ -6,6 +6,7 @@ Examples::
     scenebot schema --write
     scenebot check-config config.yaml
     scenebot rooms-gallery --seeds 1-8 --out rooms.png
+    scenebot guide serve --host 0.0.0.0
 """
 
 from __future__ import annotations
@@ -57,7 +58,9 @@ STAGE_FILES = {
               "previous_freespace_npz?", "mesh_ply?", "capture_logs*", "goals_json",
               "goals_png?"),
     "plan": ("sfm_dir", "goals_json", "navgrid_npz", "paths_json", "plot_png?"),
-    "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png"),
+    "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png", "preview_npz?"),
+    "guide-page": ("sfm_dir", "image_dir", "goals_json", "preview_npz", "coverage_png",
+                   "guide_html"),
 }  # fmt: skip
 
 
@@ -128,6 +131,25 @@ def cmd_goals_preview(args) -> int:
     cfg = _config(args)
     summary = run(cfg.goals, cfg.tour, files(args, PreviewInputs), files(args, PreviewOutputs))
     print(json.dumps(summary))
+    return 0
+
+
+def cmd_guide_page(args) -> int:
+    from scenebot.guide.page import GuideInputs, GuideOutputs, run
+
+    cfg = _config(args)
+    print(json.dumps(run(cfg.guide, files(args, GuideInputs), files(args, GuideOutputs))))
+    return 0
+
+
+def cmd_guide_serve(args) -> int:
+    from scenebot.guide.serve import serve
+
+    cfg = _config(args)
+    guide = cfg.guide.model_copy(update={k: v for k, v in (("host", args.host),
+                                 ("port", args.port)) if v is not None})  # fmt: skip
+    scene_dir = Path(args.scene_dir) if args.scene_dir else Path("results") / cfg.scene
+    serve(guide, scene_dir, round_=args.round)
     return 0
 
 
@@ -254,6 +276,25 @@ def build_parser() -> argparse.ArgumentParser:
         with_config(sp)
         add_files(sp, STAGE_FILES[name])
         sp.set_defaults(func=func)
+
+    gd = sub.add_parser("guide", help="a person's guide: the next shots on a page, on a phone")
+    gsub = gd.add_subparsers(dest="guide_command", required=True)
+    gp = gsub.add_parser("page", help="write a round's guide page (round_XXX/guide/index.html)")
+    with_config(gp)
+    add_files(gp, STAGE_FILES["guide-page"])
+    gp.set_defaults(func=cmd_guide_page)
+    gs = gsub.add_parser(
+        "serve",
+        help="serve the current round's guide to a phone and take its photos into the next "
+        "round's inbox (round_XXX/capture/inbox)",
+    )
+    with_config(gs)
+    gs.add_argument("--scene-dir", help="the campaign's folder (default results/<scene>)")
+    gs.add_argument("--round", type=int, help="the guide of this round (default: the latest)")
+    gs.add_argument("--host", help="address to listen on (default guide.host, 127.0.0.1: this "
+                    "computer only; 0.0.0.0: a phone on the same network too)")  # fmt: skip
+    gs.add_argument("--port", type=int, help="port (default guide.port)")
+    gs.set_defaults(func=cmd_guide_serve)
 
     d = sub.add_parser("dense", help="dense multi-view stereo and fusion of a map")
     with_config(d)

@@ -28,6 +28,7 @@ from pydantic import (
 from scenebot.dense.config import DenseConfig
 from scenebot.evaluate.config import EvaluateConfig
 from scenebot.goals.config import GoalsConfig
+from scenebot.guide.config import GuideConfig
 from scenebot.localize.config import LocalizeConfig
 from scenebot.mesh.config import MeshConfig
 from scenebot.plan.config import PlanConfig
@@ -406,6 +407,7 @@ class Config(Settings):
     mesh: MeshConfig = MeshConfig()
     score: ScoreConfig = ScoreConfig()
     goals: GoalsConfig = GoalsConfig()
+    guide: GuideConfig = GuideConfig()
     plan: PlanConfig = PlanConfig()
     localize: LocalizeConfig = LocalizeConfig()
     follow: FollowConfig = FollowConfig()

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from scenebot.artifacts.freespace import FreeSpace, FreeVolume, draw_freespace
-from scenebot.geometry import Intrinsics, tilted_cam_from_world
+from scenebot.geometry import Intrinsics, frustum_lines
 from scenebot.pictures import pyplot
 
 
@@ -91,29 +91,6 @@ def plot_frontier(
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def frustum_lines(poses: np.ndarray, intr: Intrinsics, depth: float) -> np.ndarray:
-    """Edges of camera frusta: centre to the four far corners, and the far rectangle.
-
-    Args:
-        poses: (N, 5) x, y, z (m), theta, pitch (rad).
-        intr: the camera.
-        depth: distance of the far rectangle (m).
-
-    Returns:
-        (N, 8, 2, 3) line segments (m).
-    """
-    Rt = tilted_cam_from_world(poses[:, :3], poses[:, 3], poses[:, 4])
-    R = Rt[:, :9].reshape(-1, 3, 3)
-    u = np.array([0.0, intr.width, intr.width, 0.0])
-    v = np.array([0.0, 0.0, intr.height, intr.height])
-    cam = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones(4)], 1) * depth
-    corners = poses[:, None, :3] + np.einsum("nji,kj->nki", R, cam)  # (N, 4, 3)
-    C = np.broadcast_to(poses[:, None, :3], corners.shape)
-    rays = np.stack([C, corners], axis=2)
-    rim = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2)
-    return np.concatenate([rays, rim], axis=1)
 
 
 def plot_person_goals(

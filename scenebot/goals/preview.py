@@ -40,9 +40,10 @@ class PreviewInputs:
 
 @dataclass
 class PreviewOutputs:
-    """Output: one tile per advised shot."""
+    """Outputs: one tile per advised shot, and the tiles themselves for the guide page."""
 
     preview_png: Path
+    preview_npz: Path | None = None  # the tiles as arrays (scenebot.artifacts.previews)
 
 
 @dataclass
@@ -170,6 +171,11 @@ def run(cfg: GoalsConfig, tour_cfg: TourConfig, inputs: PreviewInputs,
         f"{doc.get('round', '')}: what each shot would add (rendered from the photos; "
         "red: no photo sees it)",
     )  # fmt: skip
+    if outputs.preview_npz is not None:
+        from scenebot.artifacts.previews import write_previews
+
+        write_previews(outputs.preview_npz, [g["rank"] for g in goals],
+                       [p.image for p in previews], [p.missing for p in previews])  # fmt: skip
     summary = {"setup_seconds": round(setup, 3), "shots": shots}
     log.info("goals preview: %s", summary)
     return summary
