@@ -19,6 +19,7 @@ include: "rules/map.smk"
 include: "rules/final.smk"
 include: "rules/tour.smk"
 include: "rules/evaluate.smk"
+include: "rules/suite.smk"
 
 
 rule all:

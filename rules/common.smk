@@ -255,3 +255,25 @@ def validity_candidates(wildcards):
 def validity_captures(wildcards):
     """The capture logs of rounds 0..validity round (their photos and true poses)."""
     return captures_until(SimpleNamespace(r=f"{validity_round(wildcards):03d}"))
+
+
+def size_suite_rules(names):
+    """The sizes a profile gives the campaign's rules by name (set-resources and set-threads
+    of profiles/slurm), given to each suite scene's copy too (suite_<name>_<rule>), unless the
+    profile names the copy itself. Without them a suite's SLURM job asks for the
+    default-resources only (10 min and 1 GB, which kill dense and baselines) and one core.
+    """
+    from snakemake.resources import Resources
+
+    sizes = workflow.resource_settings.overwrite_resources
+    threads = workflow.resource_settings.overwrite_threads
+    prefixes = sorted((f"suite_{name}_" for name in names), key=len, reverse=True)
+    for copy in list(workflow.rules):
+        prefix = next((p for p in prefixes if copy.name.startswith(p)), None)
+        if prefix is None:
+            continue
+        base = copy.name[len(prefix) :]
+        if base in sizes and copy.name not in sizes:
+            copy.resources.update(Resources.from_mapping(sizes[base]))
+        if base in threads and copy.name not in threads:
+            copy.resources["_cores"] = threads[base]

@@ -168,10 +168,10 @@ rule validity:
 
 
 # `snakemake --cores 2 baselines` (on demand: two more campaigns): random exploration only
-# and the frontier chooser at the campaign's photo budget, each a full campaign in
-# results/{scene}/baselines/<name>/, compared by coverage per photo count and dense
-# completeness against the truth (`python -m scenebot baselines --replot-only` redraws
-# them from the campaigns already run).
+# and the frontier chooser (`suite.baselines`: which of them) at the campaign's photo
+# budget, each a full campaign in results/{scene}/baselines/<name>/, compared by coverage per
+# photo count and dense completeness against the truth (`python -m scenebot baselines
+# --replot-only` redraws them from the campaigns already run).
 rule baselines:
     input:
         code=stage_code("baselines"),
@@ -187,6 +187,8 @@ rule baselines:
         ),
     log:
         f"{RESULTS}/logs/baselines.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/baselines.tsv"
     conda:
         "../envs/scenebot.yaml"
     threads: ALL_CORES
@@ -194,7 +196,8 @@ rule baselines:
         py=PY,
         campaign=json.dumps(config),
         scene_dir=lambda w, input: Path(input.campaign).parent,
+        methods=",".join(CFG.suite.baselines),
     shell:
         "{params.py:q} -m scenebot baselines --campaign {params.campaign:q} "
-        "--scene-dir {params.scene_dir:q} --cores {threads} --out {output.json:q} "
-        "2> >(tee {log:q} >&2)"
+        "--scene-dir {params.scene_dir:q} --methods {params.methods:q} --cores {threads} "
+        "--out {output.json:q} 2> >(tee {log:q} >&2)"

@@ -61,6 +61,7 @@ STAGE_FILES = {
     "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png", "preview_npz?"),
     "guide-page": ("sfm_dir", "image_dir", "goals_json", "preview_npz", "coverage_png",
                    "guide_html"),
+    "suite-report": ("evaluations*", "baselines*", "suite_json", "suite_md", "suite_png"),
 }  # fmt: skip
 
 
@@ -208,6 +209,14 @@ def cmd_timing(args) -> int:
     return 0
 
 
+def cmd_suite_report(args) -> int:
+    from scenebot.evaluate.suite import SuiteInputs, SuiteOutputs, run
+
+    summary = run(args.names, files(args, SuiteInputs), files(args, SuiteOutputs))
+    print(json.dumps(summary, default=str))
+    return 0
+
+
 def cmd_nxt_emulator(args) -> int:
     from scenebot.robot.factory import make_emulator_world
     from scenebot.robot.nxt.backend import serve_emulator
@@ -323,6 +332,15 @@ def build_parser() -> argparse.ArgumentParser:
     cp.add_argument("--rounds", required=True, help="the rounds run, e.g. 0,1,2")
     cp.add_argument("--out", required=True, help="results/<scene>/campaign.json")
     cp.set_defaults(func=cmd_campaign)
+
+    su = sub.add_parser(
+        "suite-report",
+        help="the scene suite's table: per scene (in --names order) its final evaluation "
+        "and baselines; the median and the worst scene",
+    )
+    su.add_argument("--names", nargs="+", required=True, metavar="SCENE", help="the scenes")
+    add_files(su, STAGE_FILES["suite-report"])
+    su.set_defaults(func=cmd_suite_report)
 
     tm = sub.add_parser("timing", help="where a campaign's time went (Snakemake's benchmarks)")
     tm.add_argument("--benchmarks", required=True, help="results/<scene>/benchmarks")

@@ -26,7 +26,7 @@ from pydantic import (
 )
 
 from scenebot.dense.config import DenseConfig
-from scenebot.evaluate.config import EvaluateConfig
+from scenebot.evaluate.config import EvaluateConfig, SuiteConfig
 from scenebot.goals.config import GoalsConfig
 from scenebot.guide.config import GuideConfig
 from scenebot.localize.config import LocalizeConfig
@@ -375,8 +375,9 @@ class Config(Settings):
 
     scene: str = Field(
         "office",
-        pattern=r"^[A-Za-z0-9_.-]+$",
-        description="Name of the campaign: results go to results/<scene>/.",
+        pattern=r"^[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)?$",
+        description="Name of the campaign: results go to results/<scene>/ (one / makes a "
+        "subfolder: the suite's campaigns are suite/<name>).",
     )
     robot: Literal["sim", "nxt", "nxt-emulated", "photos"] = Field(
         "sim",
@@ -415,6 +416,7 @@ class Config(Settings):
     dense: DenseConfig = DenseConfig()
     tour: TourConfig = TourConfig()
     evaluate: EvaluateConfig = EvaluateConfig()
+    suite: SuiteConfig = SuiteConfig()
 
     @model_validator(mode="after")
     def _photos_folder(self, info: ValidationInfo) -> Config:

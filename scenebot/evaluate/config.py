@@ -6,8 +6,9 @@ Kept free of heavy imports: the workflow loads every stage's config at start.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from scenebot.settings import Settings
 
@@ -133,3 +134,85 @@ class EvaluateConfig(Settings):
         if not v or any(t <= 0 for t in v):
             raise ValueError("evaluate.thresholds_m must be a non-empty list of positive metres")
         return sorted(v)
+
+
+class SuiteScene(Settings):
+    """One scene of the suite: a built-in world with its seed, or a mesh file. Its campaign
+    runs with the workflow's settings (config.yaml, --configfile, --config) in
+    ``results/suite/<name>/``."""
+
+    name: str = Field(
+        pattern=r"^[A-Za-z][A-Za-z0-9_]*$",
+        description="Name of the scene (letters, digits, _): results/suite/<name>/, a row of "
+        "suite.json.",
+    )
+    builtin: Literal["office", "flat", "rooms"] | None = Field(
+        None,
+        description="Built-in world (world.builtin: rooms is one generated room per seed); "
+        "null when `file` is set.",
+    )
+    file: Path | None = Field(
+        None,
+        description="Textured mesh scene (OBJ+MTL, PLY with UVs, glTF/GLB), metres, z up "
+        "(world.file).",
+    )
+    seed: int = Field(7, description="Seed of the built-in scene generator (world.seed).")
+    overrides: dict[str, Any] = Field(
+        {},
+        description="Settings of this scene's campaign only, as in config.yaml (e.g. "
+        "`{world: {start: {x: 1.0, y: 2.0}}}`); the suite measures one set of settings, so "
+        "keep these to what the scene needs to exist (a start pose, a floor height).",
+    )
+
+    @model_validator(mode="after")
+    def _one_source(self) -> SuiteScene:
+        if (self.builtin is None) == (self.file is None):
+            raise ValueError(
+                f"suite scene {self.name!r}: set exactly one of builtin (allowed: 'office', "
+                "'flat', 'rooms') and file (a path to an OBJ, PLY or GLB scene)"
+            )
+        return self
+
+
+def _default_scenes() -> list[SuiteScene]:
+    rooms = [SuiteScene(name=f"rooms{k}", builtin="rooms", seed=k) for k in range(1, 7)]
+    return [SuiteScene(name="office", builtin="office", seed=7),
+            SuiteScene(name="flat", builtin="flat", seed=7), *rooms]  # fmt: skip
+
+
+class SuiteConfig(Settings):
+    """The scene suite (``snakemake --cores 2 suite``): per scene, the adaptive campaign, the
+    random and frontier baselines at its photo budget and the final evaluation, summed up in
+    ``results/suite/suite.{json,md,png}``."""
+
+    scenes: list[SuiteScene] = Field(
+        default_factory=_default_scenes,
+        description="The scenes. Default: office, flat and the generated rooms of seeds 1-6 "
+        "(rooms1..rooms6: a rectangle in paint, an L in wallpaper, a large rectangle in "
+        "wallpaper, two rooms by a doorway, an L in wood panelling, two rooms by a corridor; "
+        "scenebot/scene/rooms.py).",
+    )
+    baselines: list[Literal["random", "frontier"]] = Field(
+        ["random", "frontier"],
+        min_length=1,
+        description="The baseline campaigns run at each campaign's photo budget (rule "
+        "`baselines`: per suite scene, and `snakemake baselines` of one campaign): `random` "
+        "(random exploration only) and `frontier` (the frontier chooser's goals). Each is a "
+        "whole campaign more per scene; the suite's margins are over those run.",
+    )
+
+    @field_validator("scenes")
+    @classmethod
+    def _unique_names(cls, scenes: list[SuiteScene]) -> list[SuiteScene]:
+        names = [s.name for s in scenes]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"suite scene names must differ; given twice: {', '.join(twice)}")
+        return scenes
+
+    @field_validator("baselines")
+    @classmethod
+    def _unique_baselines(cls, methods: list[str]) -> list[str]:
+        if len(set(methods)) != len(methods):
+            raise ValueError(f"suite.baselines names a baseline twice: {', '.join(methods)}")
+        return methods
