@@ -23,9 +23,8 @@ from tests.fixtures.workflow import (
     CANNED,
     ROOT,
     SNAKEMAKE,
-    photo_folder,
-    small_final_stages,
-    snakemake,
+    photo_campaign_config,
+    shared_photo_campaign,
     why,
 )
 
@@ -175,35 +174,34 @@ def cancel_when_running(rule: str, log: Path, env: dict, done: threading.Event) 
 @pytest.mark.slow
 @pytest.mark.cluster
 @pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing")
-def test_every_stage_runs_as_a_slurm_job_and_decides_as_a_local_run(slurm_cluster, tmp_path):
+def test_every_stage_runs_as_a_slurm_job_and_decides_as_a_local_run(
+    slurm_cluster, tmp_path, tmp_path_factory
+):
     """The canned photos (`robot: photos`, the smallest every-stage campaign of
-    test_workflow.py) through every stage on the cluster: each stage is a SLURM job, the
-    bookkeeping stays here, a dense job cancelled mid-run is reported with the rule's log and
-    retried, the photos are untouched, and the decisions equal a local run's. SfM maps on one
-    thread (multi-threaded mapping is not repeatable; dense and the tour are not compared)."""
-    runs = {}
-    for name in ("local", "cluster"):
-        workdir = tmp_path / name
-        workdir.mkdir()
-        folder, before, cfg = photo_folder(workdir / "photos")
-        cfg = small_final_stages(cfg)
-        cfg["sfm"] = dict(cfg["sfm"], num_threads=1)
-        (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
-        runs[name] = (workdir, folder, before)
+    test_workflow_photos.py) through every stage on the cluster: each stage is a SLURM job,
+    the bookkeeping stays here, a dense job cancelled mid-run is reported with the rule's log
+    and retried, the photos are untouched, and the decisions equal a local run's (that
+    campaign, tests/fixtures/workflow.py's ``shared_photo_campaign``: run beside, or by the
+    test of test_workflow_photos.py that asked first). SfM maps on one thread (multi-threaded
+    mapping is not repeatable; dense and the tour are not compared)."""
+    workdir = tmp_path / "cluster"
+    workdir.mkdir()
+    folder, before, cfg = photo_campaign_config(workdir / "photos")
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
 
-    local_dir = runs["local"][0]
-    workdir, folder, before = runs["cluster"]
     done = threading.Event()
     cancelled = cancel_when_running("dense", workdir / "results/office/logs/dense.log",
                                     slurm_cluster, done)  # fmt: skip
-    with ThreadPoolExecutor(1) as pool:  # the local run beside: the decisions only
-        local_run = pool.submit(snakemake, local_dir, "results/office/campaign.json")
+    with ThreadPoolExecutor(1) as pool:  # the local run beside (or read, if run already)
+        local_run = pool.submit(shared_photo_campaign, tmp_path_factory)
         try:
             res = cluster_snakemake(workdir, slurm_cluster)
         finally:
             done.set()
         local = local_run.result()
-    assert local.returncode == 0, why(local, local_dir)
+    local_dir = local.workdir
+    assert local.round0.returncode == 0, why(local.round0, local_dir)
+    assert local.final.returncode == 0, why(local.final, local_dir)
     out = res.stdout + res.stderr
     assert res.returncode == 0, why(res, workdir)
 
