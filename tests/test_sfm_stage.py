@@ -333,8 +333,8 @@ def test_a_wrong_registration_is_corrected_from_the_robots_estimate(round0, roun
 
     real = register._register_next
 
-    def misplaced(mapper, mopts, structure_less):
-        iid = real(mapper, mopts, structure_less)
+    def misplaced(mapper, mopts, structure_less, skip=frozenset()):
+        iid = real(mapper, mopts, structure_less, skip)
         if iid is not None and iid % 2 == 0:
             frame = mapper.reconstruction.frame(mapper.reconstruction.image(iid).frame_id)
             turn = pycolmap.Rigid3d(pycolmap.Rotation3d(np.array([0.0, 0.05, 0.0])), [0.2, 0, 0])
@@ -345,6 +345,34 @@ def test_a_wrong_registration_is_corrected_from_the_robots_estimate(round0, roun
     base, cap0, out0, _, _ = round0
     report, _, new = _run_round1(base, cap0, round1[0], out0.model_dir, "misplaced")
     assert report["refinement"]["poses_from_robot_estimate"] >= 12
+    assert len(new) == 24 and max(new.values()) < 0.02
+
+
+def test_a_registration_far_from_the_robots_estimate_is_estimated_again(
+    round0, round1, monkeypatch
+):
+    """Every other new photo comes out of RANSAC 1.5 m along the wall (a repeated texture's
+    other copy: beyond sfm.max_estimate_deviation_m of the robot's estimate): its pose is
+    estimated again from the matches the estimate allows, and every new photo ends within
+    2 cm of the truth; the fast path needs no fallback."""
+    import scenebot.sfm.register as register
+
+    real = register._register_next
+
+    def copied(mapper, mopts, structure_less, skip=frozenset()):
+        iid = real(mapper, mopts, structure_less, skip)
+        if iid is not None and iid % 2 == 0:
+            frame = mapper.reconstruction.frame(mapper.reconstruction.image(iid).frame_id)
+            shift = pycolmap.Rigid3d(pycolmap.Rotation3d(np.zeros(3)), [1.5, 0.0, 0.0])
+            frame.rig_from_world = shift * frame.rig_from_world
+        return iid
+
+    monkeypatch.setattr(register, "_register_next", copied)
+    base, cap0, out0, _, _ = round0
+    report, _, new = _run_round1(base, cap0, round1[0], out0.model_dir, "copied")
+    assert report["mapping_mode"] == "registered"
+    assert report["refinement"]["poses_from_gated_matches"] >= 12
+    assert report["refinement"]["rejected_against_robot_estimate"] == 0
     assert len(new) == 24 and max(new.values()) < 0.02
 
 

@@ -546,6 +546,7 @@ def map_photos(
     previous: pycolmap.Reconstruction | None = None,
     fix_focal: bool = False,
     person_photos: bool = False,
+    held: pycolmap.Reconstruction | None = None,
 ) -> MappingResult:
     """Map the photos ``names``; keep the largest model.
 
@@ -567,6 +568,9 @@ def map_photos(
             bundle adjustments and pose estimates.
         person_photos: the photos are a person's photo folder (``robot: photos``), for
             ``cfg.global_sfm_fallback = "photos"``.
+        held: the model whose photos keep their poses in the final refinement
+            (``cfg.update_keep_previous_poses``; default ``previous``: round r-1's map when
+            ``previous`` also holds photos registered this round).
 
     Returns:
         The kept model and the dropped photos with reasons.
@@ -598,8 +602,9 @@ def map_photos(
     ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
     best = ranked[0]
     kept_previous: frozenset[str] = frozenset()
-    if mode == "incremental" and cfg.update_keep_previous_poses and previous is not None:
-        prev_names = {previous.image(i).name for i in previous.reg_image_ids()}
+    held = previous if held is None else held
+    if mode == "incremental" and cfg.update_keep_previous_poses and held is not None:
+        prev_names = {held.image(i).name for i in held.reg_image_ids()}
         kept_previous = frozenset(
             best.image(i).name for i in best.reg_image_ids() if best.image(i).name in prev_names
         )

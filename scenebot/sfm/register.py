@@ -82,7 +82,7 @@ def map_new_photos(
     cfg: SfmConfig,
     previous: pycolmap.Reconstruction,
     camera_offset_m: tuple[float, float] | None,
-) -> MappingResult | None:
+) -> tuple[MappingResult | None, pycolmap.Reconstruction]:
     """The fast path: the new photos registered into ``previous`` (:func:`register_new_photos`,
     the robot's estimates as second initial guesses, :func:`camera_priors`) and refined
     (:func:`refine_new_photos`); mode ``registered``.
@@ -103,15 +103,20 @@ def map_new_photos(
     )
     reg = register_new_photos(db_path, image_root, names, cfg, previous, priors)
     n_new = len(names) - len(reg.previous_ids)
-    if len(reg.new_ids) < cfg.min_registered_share * n_new:
+    # a photo taken out against the robot's estimate is judged, not missed: the incremental
+    # mapper would only register it where the estimate says it was not (and the stage would
+    # leave it out again, sfm.max_estimate_deviation_m)
+    if len(reg.new_ids) + len(reg.rejected) < cfg.min_registered_share * n_new:
         log.warning(
-            "%d of %d new photos registered into the previous map (< sfm.min_registered_share "
-            "= %g): continuing with the incremental mapper",
+            "%d of %d new photos registered into the previous map, %d taken out against the "
+            "robot's estimate (< sfm.min_registered_share = %g): continuing with the "
+            "incremental mapper",
             len(reg.new_ids),
             n_new,
+            len(reg.rejected),
             cfg.min_registered_share,
         )
-        return None
+        return None, reg.reconstruction
     refinement = refine_new_photos(reg, cfg) | reg.stats
     refinement["fixed_previous_photos"] = len(reg.previous_ids)
     rec = reg.reconstruction
@@ -121,7 +126,7 @@ def map_new_photos(
         n_new,
         time.perf_counter() - t0,
     )
-    return MappingResult(
+    result = MappingResult(
         rec,
         "registered",
         1,
@@ -130,6 +135,7 @@ def map_new_photos(
         refinement,
         new_ids=reg.new_ids,
     )
+    return result, rec
 
 
 def camera_xy(

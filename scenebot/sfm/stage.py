@@ -532,17 +532,18 @@ def _focal_fixed(cfg: SfmConfig, photos: list[Photo]) -> bool:
 def _map(s: _Session) -> MappingResult:
     """Map the photos: an adaptive round's new photos registered into the previous map
     (``cfg.register_new_photos``, :func:`map_new_photos`), else (or when too few register)
-    :func:`map_photos`."""
+    :func:`map_photos`, continuing from the previous map with the photos the fast path
+    registered."""
     cfg = s.cfg
-    mres = None
+    mres, start = None, s.previous
     if s.previous is not None and cfg.incremental and cfg.register_new_photos:
-        mres = map_new_photos(
+        mres, start = map_new_photos(
             s.db_path, s.root, s.photos, cfg, s.previous, _previous_camera_offset(s)
         )
     if mres is None:
         mres = map_photos(
-            s.db_path, s.root, s.names, s.work / "mapping", cfg, s.previous, s.fix_focal,
-            person_photos=s.person,
+            s.db_path, s.root, s.names, s.work / "mapping", cfg, start, s.fix_focal,
+            person_photos=s.person, held=s.previous,
         )  # fmt: skip
     s.timings["map"] = mres.seconds
     return mres
