@@ -104,7 +104,8 @@ def round_products(wildcards):
         files += [f"{d}/{f}" for f in ("goals.json", "goals.png")]
         if PHOTOS:  # each advised shot rendered from the photos (rule goals_preview)
             files.append(f"{d}/goals_preview.png")
-            files.append(f"{d}/guide/index.html")  # the person's guide page (rule guide)
+            # the person's guide page (rule guide)
+            files.append(f"{d}/guide/index.html")
         if not PHOTOS:  # a person's photos: no robot to plan paths for
             files += [f"{d}/{f}" for f in ("paths.json", "navgrid.png")]
     return files
