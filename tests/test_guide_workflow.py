@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import threading
 from pathlib import Path
 
@@ -18,6 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.fixtures.browser import chromium, needs_browser
 from tests.fixtures.workflow import CANNED, photo_folder, small_final_stages, snakemake, why
 from tests.test_guide_page import data_uri_image, page_json, shot_cards
 
@@ -27,15 +27,6 @@ pytestmark = [
 ]
 
 K = 3
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMEDRIVER = shutil.which("chromedriver") or (
-    "/usr/bin/chromedriver" if Path("/usr/bin/chromedriver").exists() else None
-)
-needs_browser = pytest.mark.skipif(
-    CHROMIUM is None or CHROMEDRIVER is None,
-    reason="headless browser test needs Debian's chromium and chromium-driver packages "
-    "(apt-get install chromium chromium-driver)",
-)
 
 
 @pytest.fixture(scope="module")
@@ -78,22 +69,7 @@ def test_the_page_shows_the_rounds_shots(guided_round):
 
 @pytest.fixture(scope="module")
 def driver():
-    if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip("no chromium")
-    try:  # chromium is here, so the driver must be too: a missing selenium is a failure
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
-    except ImportError as exc:
-        pytest.fail(f"chromium is installed but selenium is not ({exc}): pip install selenium")
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1280,900"):  # fmt: skip
-        opts.add_argument(arg)
-    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    drv = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
-    yield drv
-    drv.quit()
+    yield from chromium(1280, 900)
 
 
 def _errors(driver) -> list[dict]:

@@ -332,6 +332,17 @@ def test_every_candidate_near_an_abandoned_goal_is_still_chosen_from(scored_room
     assert doc["goals"]
 
 
+def _goals_after(scored_room, prev_doc: dict, prev, log):
+    """Round 3's goals after a round 2 whose goals.json says ``prev_doc``."""
+    prev.write_text(json.dumps(prev_doc))
+    return run_goals(
+        GoalsConfig(k=6, patience=2, min_matchable_points=0),
+        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
+                    scored_room["root"] / "sfm", prev, capture_logs=[log]),
+        GoalsOutputs(prev.parent.parent / "round_003" / "goals.json"),
+    )  # fmt: skip
+
+
 @pytest.mark.parametrize(("idle_before", "stuck"), [(0, False), (1, True)])
 def test_a_campaign_whose_rounds_add_no_photo_stops_as_stuck(
     scored_room, tmp_path, idle_before, stuck
@@ -341,27 +352,15 @@ def test_a_campaign_whose_rounds_add_no_photo_stops_as_stuck(
     the score says; one idle round after a productive one does not stop it."""
     prev = tmp_path / "round_002" / "goals.json"
     prev.parent.mkdir()
-    prev.write_text(json.dumps({"map_images": 72, "idle": {"rounds": idle_before}}))
     log = _abandoned_log(tmp_path / "round_003" / "capture" / "log.jsonl", [(9.0, 9.0)] * 4)
-    doc = run_goals(
-        GoalsConfig(k=6, patience=2, min_matchable_points=0),
-        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
-                    scored_room["root"] / "sfm", prev, capture_logs=[log]),
-        GoalsOutputs(tmp_path / "round_003" / "goals.json"),
-    )  # fmt: skip
+    doc = _goals_after(scored_room, {"map_images": 72, "idle": {"rounds": idle_before}}, prev, log)
     assert doc["idle"]["rounds"] == idle_before + 1
     assert doc["complete"] is stuck and doc.get("stuck", False) is stuck
     if stuck:
         why = doc["complete_because"]
         assert why.startswith("stuck: 2 rounds in a row added no photo") and "4 (4 x 5 obst" in why
     # a round that added photos resets the count
-    prev.write_text(json.dumps({"map_images": 60, "idle": {"rounds": 5}}))
-    doc = run_goals(
-        GoalsConfig(k=6, patience=2, min_matchable_points=0),
-        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
-                    scored_room["root"] / "sfm", prev, capture_logs=[log]),
-        GoalsOutputs(tmp_path / "round_003" / "goals.json"),
-    )  # fmt: skip
+    doc = _goals_after(scored_room, {"map_images": 60, "idle": {"rounds": 5}}, prev, log)
     assert doc["idle"]["rounds"] == 0 and not doc.get("stuck")
 
 

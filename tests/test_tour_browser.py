@@ -11,26 +11,15 @@ skipped with the reason when one is missing.
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
 import pytest
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMEDRIVER = shutil.which("chromedriver") or (
-    "/usr/bin/chromedriver" if Path("/usr/bin/chromedriver").exists() else None
-)
+from tests.fixtures.browser import chromium, needs_browser
 
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(
-        CHROMIUM is None or CHROMEDRIVER is None,
-        reason="headless browser test needs Debian's chromium and chromium-driver packages "
-        "(apt-get install chromium chromium-driver)",
-    ),
-]
+pytestmark = [pytest.mark.slow, needs_browser]
 
 
 @pytest.fixture(scope="module")
@@ -57,22 +46,7 @@ def tour_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def driver():
-    try:  # chromium is here, so the driver must be too: a missing selenium is a failure
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
-    except ImportError as exc:
-        pytest.fail(f"chromium is installed but selenium is not ({exc}): pip install selenium")
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1280,800"):  # fmt: skip
-        opts.add_argument(arg)
-    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    # the system chromedriver: Selenium Manager never downloads anything
-    drv = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
-    yield drv
-    drv.quit()
+    yield from chromium(1280, 800)
 
 
 def _shown_frame(driver) -> tuple[str, str, int]:
