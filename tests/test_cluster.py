@@ -32,7 +32,9 @@ SCRIPT = ROOT / "scripts" / "slurm-local"
 PROFILE = ROOT / "profiles" / "slurm"
 SLURM_BINARIES = ("munged", "mungekey", "slurmctld", "slurmd", "sbatch", "squeue", "scancel")
 # the rules of a `robot: photos` campaign that run as SLURM jobs, and those that run here
-CLUSTER_RULES = {"sfm", "mesh", "score", "goals", "goals_preview", "campaign", "dense", "tour"}
+CLUSTER_RULES = {
+    "sfm", "mesh", "score", "goals", "goals_preview", "guide", "campaign", "dense", "tour",
+}  # fmt: skip
 LOCAL_RULES = {"timing", "all"}
 
 
