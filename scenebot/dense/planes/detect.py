@@ -67,11 +67,37 @@ def _first_per_voxel(keys: np.ndarray) -> np.ndarray:
     return np.unique(flat, return_index=True)[1]
 
 
-def _fit_plane(x: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least-squares plane through points: unit normal and offset."""
-    c = x.mean(0)
-    n = np.linalg.svd(x - c, full_matrices=False)[2][-1]
-    return n, float(-n @ c)
+#: Tukey's biweight constant (95% efficiency at the normal distribution)
+TUKEY_C = 4.685
+
+
+def _fit_plane(x: np.ndarray, iterations: int = 10) -> tuple[np.ndarray, float]:
+    """Robust plane through points: unit normal and offset.
+
+    Least squares, then iteratively reweighted with Tukey's biweight on the residuals
+    (scale: their median absolute deviation). A plain least-squares fit over a RANSAC band
+    is pulled by what the band also holds (a baseboard's foot, a rug's edge, a table leg):
+    the office's floor came out 0.2 deg tilted from 45,000 points whose robust fit is level
+    within 0.02 deg, and the tilt, handed to every plane as the room's up, put its ceiling
+    1-3 cm off across the room.
+    """
+    w = np.ones(len(x))
+    n, d = np.array([0.0, 0.0, 1.0]), 0.0
+    for k in range(iterations + 1):
+        c = (w[:, None] * x).sum(0) / w.sum()
+        y = (x - c) * np.sqrt(w)[:, None]
+        n = np.linalg.svd(y, full_matrices=False)[2][-1]
+        d = float(-n @ c)
+        if k == iterations or len(x) < 4:
+            break
+        r = x @ n + d
+        scale = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+        if scale <= 1e-12:
+            break
+        w = np.clip(1.0 - (r / (TUKEY_C * scale)) ** 2, 0.0, None) ** 2
+        if w.sum() < 3:
+            break
+    return n, d
 
 
 def _ransac_point_normal(
@@ -87,7 +113,8 @@ def _ransac_point_normal(
 
     A point agrees when it lies within ``distance_m`` of the plane and its own normal is
     within ``arccos(cos_normal)`` of the plane's. Hypotheses come from single oriented
-    points (Schnabel et al.'s oriented RANSAC); the best is refitted by least squares twice.
+    points (Schnabel et al.'s oriented RANSAC); the best is refitted robustly twice
+    (:func:`_fit_plane`).
 
     Returns:
         The unit normal, offset and the (N,) inlier mask over ``pts``.
@@ -111,7 +138,7 @@ def _ransac_point_normal(
 
 
 def _segment_plane(rest: np.ndarray, distance_m: float, min_size: float):
-    """open3d's ``segment_plane`` on positions alone, refitted by least squares: unit
+    """open3d's ``segment_plane`` on positions alone, refitted robustly (:func:`_fit_plane`): unit
     normal, offset and the (N,) inlier mask; None when its plane holds fewer than
     ``min_size`` points."""
     import open3d as o3d
@@ -217,7 +244,7 @@ def detect_planes(
     stereo's per-pixel normals), oriented RANSAC (:func:`_ransac_point_normal`) does, and a
     point belongs to a plane only where its normal agrees within ``normal_deg``: a phantom
     plane that cuts across several surfaces (a diagonal through box corners, a slice beneath
-    the floor) finds no support. Each plane is refitted by least squares to its inliers (and
+    the floor) finds no support. Each plane is refitted robustly to its inliers (and
     takes the points within ``distance_m`` of the refit); a plane within
     ``merge_angle_deg`` and ``2 * distance_m`` of one already found (a noisy floor peeled in
     slices) is merged into it.
