@@ -143,6 +143,24 @@ def test_free_space_of_a_room_stays_inside_it(room_map):
     assert (c[:, 0] < 0).mean() > 0.6
 
 
+def test_a_camera_kilometres_off_leaves_the_free_space_as_it_was(tmp_path, caplog):
+    """A mapping error puts one camera 5 km off (a multi-threaded map of the canned photos
+    once did): the grid over every camera would have voxels of hundreds of metres and a
+    degenerate free space; the camera is left out of the bulk, named in the log."""
+    rng = np.random.default_rng(3)
+    V, F = syn.box_mesh(*OBJECT, 0.1)
+    centres, targets = object_ring(rng)
+    centres = np.r_[centres, [[5000.0, 0.0, 0.0]]]
+    targets = np.r_[targets, [[0.0, 0.0, 0.0]]]
+    with caplog.at_level("WARNING"):
+        out, _ = mapped(tmp_path / "temple" / "round_000", V, F, centres, targets, 4000, rng)
+    vol = FreeVolume.load(out.freespace_npz)
+    assert vol.voxel == MeshConfig().volume.voxel_m
+    assert json.loads(out.freespace_json.read_text())["volume"]["degenerate"] is None
+    assert vol.contains(centres[:-1]).mean() > 0.9 and not vol.contains(centres[-1:]).any()
+    assert "1 camera(s) farther than mesh.max_point_range_m" in caplog.text
+
+
 def test_too_little_free_space_is_an_error_naming_the_setting(tmp_path):
     rng = np.random.default_rng(5)
     V, F = syn.box_mesh(*OBJECT, 0.1)

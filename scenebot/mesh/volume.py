@@ -33,19 +33,48 @@ from scenebot.mesh.config import MeshConfig, VolumeConfig
 log = logging.getLogger(__name__)
 
 
+def bulk_cameras(cams: np.ndarray, range_m: float) -> np.ndarray:
+    """Which cameras belong to the map's bulk: the largest group of cameras linked through
+    neighbours closer than ``range_m`` (m) (a room's cameras are centimetres to metres
+    apart; a camera a mapping error put kilometres off is alone). (S,) bool."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if len(cams) < 2:
+        return np.ones(len(cams), bool)
+    pairs = cKDTree(cams).query_pairs(range_m, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (len(cams),) * 2)
+    _, label = connected_components(graph, directed=False)
+    return label == np.bincount(label).argmax()
+
+
 def lines_of_sight(
     sfm_dir: str | Path, min_track_length: int, max_range_m: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """The map's lines of sight: camera centre to observed 3D point, for the points the mesh
-    uses (a track of at least ``min_track_length``, within ``max_range_m`` of some camera).
+    uses (a track of at least ``min_track_length``, within ``max_range_m`` of some camera),
+    from the cameras of the map's bulk (:func:`bulk_cameras`; the others are logged).
 
     Returns:
-        (M, 2, 3) segments [camera centre, point] (m), and (S, 3) the camera centres (m).
+        (M, 2, 3) segments [camera centre, point] (m), and (S, 3) the bulk's camera centres
+        (m).
     """
     import pycolmap
 
     rec = pycolmap.Reconstruction(str(sfm_dir))
     centres = {i: np.asarray(rec.image(i).projection_center(), float) for i in rec.reg_image_ids()}
+    ids = list(centres)
+    bulk = bulk_cameras(np.array([centres[i] for i in ids]).reshape(-1, 3), max_range_m)
+    if not bulk.all():
+        log.warning(
+            "%d camera(s) farther than mesh.max_point_range_m = %g m from the map's bulk left "
+            "out of the free space: %s",
+            int((~bulk).sum()),
+            max_range_m,
+            ", ".join(rec.image(i).name for i, b in zip(ids, bulk, strict=True) if not b),
+        )
+        centres = {i: c for (i, c), b in zip(centres.items(), bulk, strict=True) if b}
     cams = np.array(list(centres.values()), float).reshape(-1, 3)
     segs = []
     for pt in rec.points3D.values():
@@ -195,6 +224,10 @@ def person_freespace(
     """
     segs, cams = lines_of_sight(sfm_dir, cfg.min_track_length, cfg.max_point_range_m)
     pts = np.unique(segs[:, 1], axis=0) if len(segs) else np.zeros((0, 3))
+    if len(verts) and len(cams):  # the mesh around a camera left out of the bulk
+        from scipy.spatial import cKDTree
+
+        verts = verts[cKDTree(cams).query(verts)[0] <= cfg.max_point_range_m]
     vol = compute_volume(segs, cams, np.concatenate([pts, verts]), cfg.volume, where)
     mask = vol.layer(vol.camera_height)
     closed = not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
