@@ -1256,12 +1256,16 @@ def angle_row_cpu(
 
 
 @ti.func
-def view_degrees(pix: ti.template(), sums: ti.template(), b: ti.i32):
+def view_degrees(pix: ti.template(), sums: ti.template(), b: ti.i32, keep: ti.template()):
     """Pixel scores (degrees, as :func:`angles`) of view b from the cosines that
-    :func:`angle_row_cpu` leaves in ``pix[b]``, and the view's sums (see :func:`view_sums`).
+    :func:`angle_row_cpu` leaves in ``pix[b]``, and the view's sums (see :func:`view_sums`);
+    the degrees are written back to ``pix[b]`` only if ``keep`` (the pixels are wanted).
 
     A pass of its own, with no branch, rather than inside the search, where the arc cosine's
-    latency held up the next pixel's work."""
+    latency held up the next pixel's work. Without ``keep`` the loop stores nothing, and the
+    compiler keeps every array's address and shape out of it (a store might change them, it
+    assumes) and runs it on vectors of pixels: the sums then add in another order (float32
+    rounding: 1e-5 degrees of a view's score)."""
     total = 0.0
     hits = 0
     seen = 0
@@ -1271,7 +1275,8 @@ def view_degrees(pix: ti.template(), sums: ti.template(), b: ti.i32):
             c = pix[b, j, i]
             deg = acos_poly(ti.min(1.0, ti.max(-1.0, c))) * 57.29577951308232
             out = ti.select(c < -2.5, -1.0, ti.select(c < -1.5, 180.0, deg))
-            pix[b, j, i] = out
+            if ti.static(keep):
+                pix[b, j, i] = out
             hit = c > -2.5
             row_total += ti.select(hit, out, 0.0)
             hits += ti.cast(hit, ti.i32)
@@ -1309,6 +1314,7 @@ def score_per_view(
     tol: ti.f32,
     pix: nd(dtype=ti.f32, ndim=3),
     sums: nd(dtype=ti.f32, ndim=2),
+    keep_pixels: ti.template(),
 ):
     """All passes of the score for views 0..n-1, one thread per view (see :func:`task_view`
     for ``n_tasks``): for CPUs.
@@ -1338,4 +1344,4 @@ def score_per_view(
                     depth, L, D0, Dx, Dy, src_proj, src_dmax, src_mm, tiles_x, tiles_y, lists,
                     tsrc, groups, n_active, tol, near, pix, b, j,
                 )  # fmt: skip
-            view_degrees(pix, sums, b)
+            view_degrees(pix, sums, b, keep_pixels)

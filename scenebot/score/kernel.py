@@ -487,7 +487,7 @@ class TaichiScorer:
                     self._depth, tx, ty, self._bounds, self._src_centres, self._planes,
                     self._near_srcs, self._lists, self._tsrc, self._groups, self._n_active,
                     self._src_proj, self._src_dmax, self._src_mm, self.tol, self._pix,
-                    self._sums,
+                    self._sums, bool(return_pixels),
                 )  # fmt: skip
                 sums.append(self._sums.to_numpy()[:m].astype(np.float64))
                 if return_pixels:
