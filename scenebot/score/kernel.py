@@ -153,6 +153,7 @@ def _kernels():
         "angles": k.angles,
         "view_sums": k.view_sums,
         "score_per_view": k.score_per_view,
+        "pixel_degrees": k.pixel_degrees,
         "neighbourhood_max": k.neighbourhood_max,
         "block_min_max": k.block_min_max,
     }
@@ -487,10 +488,11 @@ class TaichiScorer:
                     self._depth, tx, ty, self._bounds, self._src_centres, self._planes,
                     self._near_srcs, self._lists, self._tsrc, self._groups, self._n_active,
                     self._src_proj, self._src_dmax, self._src_mm, self.tol, self._pix,
-                    self._sums, bool(return_pixels),
+                    self._sums,
                 )  # fmt: skip
                 sums.append(self._sums.to_numpy()[:m].astype(np.float64))
                 if return_pixels:
+                    self.k["pixel_degrees"](self._pix, m)
                     outs.append(self._pix.to_numpy()[:m])
                 continue
             self._render(v32)
