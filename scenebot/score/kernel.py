@@ -153,6 +153,7 @@ def _kernels():
         "angles": k.angles,
         "view_sums": k.view_sums,
         "score_per_view": k.score_per_view,
+        "pixel_degrees": k.pixel_degrees,
         "neighbourhood_max": k.neighbourhood_max,
         "block_min_max": k.block_min_max,
     }
@@ -491,6 +492,7 @@ class TaichiScorer:
                 )  # fmt: skip
                 sums.append(self._sums.to_numpy()[:m].astype(np.float64))
                 if return_pixels:
+                    self.k["pixel_degrees"](self._pix, m)
                     outs.append(self._pix.to_numpy()[:m])
                 continue
             self._render(v32)
