@@ -506,7 +506,7 @@ def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_es
 
     import pycolmap
 
-    from scenebot.sfm.register import _Tolerance, gate_correspondences, pose_near_estimate
+    from scenebot.sfm.register import Tolerance, gate_correspondences, pose_near_estimate
 
     cam = pycolmap.Camera.create_from_model_name(1, "PINHOLE", 500.0, 640, 480)
 
@@ -534,15 +534,14 @@ def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_es
     est.ransac.random_seed = 0
     plain = pycolmap.estimate_and_refine_absolute_pose(xy, xyz, cam, est)["cam_from_world"]
     assert np.linalg.norm(centre(plain) - centre(truth)) > 1.0
-    tol = _Tolerance(0.5, 12.0)
+    tol = Tolerance(0.5, 12.0)
     pose = pose_near_estimate(cam, prior, xy, xyz, tol, 4.0, 30)
     assert pose is not None and np.linalg.norm(centre(pose) - centre(truth)) < 0.02
     near_copy = level(0.2, 1.3, 3.0)
     pose = pose_near_estimate(cam, near_copy, xy, xyz, tol, 4.0, 30)
     assert pose is not None and np.linalg.norm(centre(pose) - centre(plain)) < 0.05
     assert (
-        pose_near_estimate(cam, level(0.0, 3.0, 0.0), xy, xyz, _Tolerance(0.3, 5.0), 4.0, 30)
-        is None
+        pose_near_estimate(cam, level(0.0, 3.0, 0.0), xy, xyz, Tolerance(0.3, 5.0), 4.0, 30) is None
     )
     behind = wall * np.array([-1.0, 1.0, 1.0])
     assert not gate_correspondences(cam, prior, px, behind, 0.5, 12.0).any()
@@ -550,4 +549,4 @@ def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_es
     assert gate_correspondences(cam, prior, px[:0], wall[:0], 0.5, 12.0).shape == (0,)
     assert tol.agrees(truth, prior) and not tol.agrees(level(0.0, 1.2, 0.0), prior)
     assert not tol.agrees(level(0.3, 0.1, 25.0), prior)
-    assert _Tolerance(0.0, 0.0).agrees(level(5.0, 5.0, 90.0), prior)  # off
+    assert Tolerance(0.0, 0.0).agrees(level(5.0, 5.0, 90.0), prior)  # off

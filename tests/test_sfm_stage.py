@@ -403,13 +403,13 @@ def test_new_photos_the_map_cannot_explain_ask_for_the_global_refinement(
     points worse than the previous photos do (sfm.max_residual_ratio)."""
     from scenebot.sfm.mapping import ObservationTable
     from scenebot.sfm.photos import photos_from_captures
-    from scenebot.sfm.register import _points_of, global_refinement_checks, residual_ratio
+    from scenebot.sfm.register import global_refinement_checks, points_of, residual_ratio
 
     cap0 = round0[1]
     rec = pycolmap.Reconstruction(str(round1_map[1].model_dir))
     _, photos = photos_from_captures([cap0, round1[0]])
     new = [i for i in rec.reg_image_ids() if "round_001" in rec.image(i).name]
-    points = _points_of(rec, new)
+    points = points_of(rec, new)
     table = ObservationTable(rec, point_ids=points)
     cfg = SfmConfig()
     ratio = residual_ratio(rec, table, new)
@@ -423,6 +423,71 @@ def test_new_photos_the_map_cannot_explain_ask_for_the_global_refinement(
     checks = global_refinement_checks(rec, new, ratio, photos, (0.1, 0.0), cfg)
     assert ratio > cfg.max_residual_ratio and checks["run"]
     assert "sfm.max_residual_ratio" in checks["reasons"][0]
+
+
+def _take_out_second_circle(monkeypatch):
+    """Make the stage's check against the robot's estimate also take round 1's second
+    circle out of the map (as a repeated texture's copy would have put it)."""
+    import scenebot.sfm.stage as stage
+
+    real = stage.drop_misplaced
+
+    def and_the_second_circle(rec, photos, camera_offset_m, max_deviation_m):
+        out = real(rec, photos, camera_offset_m, max_deviation_m)
+        for iid in list(rec.reg_image_ids()):
+            name = rec.image(iid).name
+            if "round_001" in name and int(name[-8:-4]) >= 12:
+                rec.deregister_frame(rec.image(iid).frame_id)
+                out[name] = 1.5
+        stage._delete_loose_points(rec)
+        return out
+
+    monkeypatch.setattr(stage, "drop_misplaced", and_the_second_circle)
+
+
+def test_photos_left_out_are_placed_at_the_robots_estimate(round0, round1, monkeypatch):
+    """Twelve photos taken out of the map are placed at the robot's estimate, triangulated
+    and adjusted with a prior there: every one back within 2 cm of the truth, anchored to
+    the map, and the report says so."""
+    _take_out_second_circle(monkeypatch)
+    base, cap0, out0, _, _ = round0
+    report, _, new = _run_round1(
+        base, cap0, round1[0], out0.model_dir, "placed", place_left_out_photos=True
+    )
+    placed = report["placed"]
+    assert placed["tried"] == 12 and len(placed["kept"]) == 12 and not placed["taken_out"]
+    assert min(placed["anchored"].values()) >= 30
+    assert report["registered"] == 60 and not report["dropped"]
+    assert len(new) == 24 and max(new.values()) < 0.02
+
+
+def test_photos_placed_at_a_wrong_estimate_are_taken_out_again(round0, round1, tmp_path):
+    """The robot's estimates of round 1 are 1 m off (a robot that is lost; the stage would
+    stop at sfm.min_registered_share, lowered here): its photos, placed there, agree with
+    each other but not with the map, and none stays in it."""
+    base = round0[0]
+    scene = tmp_path / "scene"
+    shutil.copytree(base / "round_000", scene / "round_000")
+    shutil.copytree(base / "sfm_db", scene / "sfm_db")
+    cap1 = round1[1](scene, bias=(1.0, 0.0))
+    report, _, new = _run_round1(
+        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1",
+        min_registered_share=0.5, place_left_out_photos=True,
+    )  # fmt: skip
+    placed = report["placed"]
+    assert placed["tried"] == 24 and placed["kept"] == [] and not new
+    assert report["registered"] == 36
+    assert all("placed at the robot's estimate" in why for why in report["dropped"].values())
+
+
+def test_no_photo_is_placed_when_placing_is_off(round0, round1, monkeypatch):
+    _take_out_second_circle(monkeypatch)
+    base, cap0, out0, _, _ = round0
+    report, _, new = _run_round1(
+        base, cap0, round1[0], out0.model_dir, "not_placed", place_left_out_photos=False
+    )
+    assert report["placed"] == {} and report["registered"] == 48 and len(new) == 12
+    assert sum("1.50 m" in why for why in report["dropped"].values()) == 12
 
 
 @pytest.mark.slow

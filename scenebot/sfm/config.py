@@ -190,6 +190,32 @@ class SfmConfig(Settings):
             "position is wrong too), named in the log and report.json; 0 turns it off."
         ),
     )
+    place_left_out_photos: bool = Field(
+        False,
+        description=(
+            "Photos the map leaves out (not registered, or registered beyond "
+            "max_estimate_deviation_m / max_compass_deviation_deg of the robot's estimate: "
+            "repeating texture) that have a robot estimate are placed at it, registered, "
+            "triangulated with the map and with each other, and bundle-adjusted with a "
+            "position prior (place_prior_std_m), the map's points held; one stays when as "
+            "many observations agree with it as the mapper asks of any registration, its "
+            "group of placed photos matches as many of the map's own points, and it is still "
+            "within the tolerances (scenebot.sfm.place). Off by default: on the f9d0320 "
+            "flat's final round it brought back 9-10 of 29 left-out photos, 0.1-2 cm and up to "
+            "1 deg from the truth (they see walls the map's photos do not, so their group "
+            "is held by few map points), and the dense model came out 19.9% complete at 2 cm "
+            "with 83.2% accuracy against 20.7% and 85.2% without them (docs/results.md)."
+        ),
+    )
+    place_prior_std_m: float = Field(
+        0.03,
+        gt=0.0,
+        description=(
+            "With place_left_out_photos: standard deviation (m) of the position prior at "
+            "the robot's estimate (its visual fixes against the map: median 0.2-0.6 cm, "
+            "p90 1-3 cm per round in the office and the flat)."
+        ),
+    )
     update_keep_previous_poses: bool = Field(
         True,
         description=(

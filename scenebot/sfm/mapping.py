@@ -119,10 +119,12 @@ class ObservationTable:
             self.image_ids, np.fromiter(rec.reg_image_ids(), np.int64)
         )
         xyz = np.zeros((len(pids), 3))
-        xyz[exists] = [rec.point3D(int(p)).xyz for p in pids[exists]]
+        xyz[exists] = np.reshape([rec.point3D(int(p)).xyz for p in pids[exists]], (-1, 3))
         X = xyz[inverse[alive]]
         self._keep(alive)
         err = np.empty(len(self))
+        if not len(self):
+            return err
         starts = np.r_[0, np.flatnonzero(np.diff(self.image_ids)) + 1, len(self)]
         for a, b in itertools.pairwise(starts):  # rows grouped by image
             im = rec.image(int(self.image_ids[a]))
@@ -132,14 +134,17 @@ class ObservationTable:
             err[a:b][cam_pts[:, 2] <= 0] = np.inf
         return err
 
-    def delete_beyond(self, rec: pycolmap.Reconstruction, max_error_px: float) -> int:
+    def delete_beyond(self, rec: pycolmap.Reconstruction, max_error_px: float, delete=None) -> int:
         """Delete the observations whose reprojection error exceeds ``max_error_px`` (px)
-        or is not finite from ``rec`` and the table; returns how many."""
+        or is not finite from ``rec`` and the table; returns how many. ``delete(image_id,
+        point2D_idx)`` deletes one (default ``rec.delete_observation``; an incremental
+        mapper's ``observation_manager.delete_observation`` keeps its bookkeeping)."""
+        delete = delete or rec.delete_observation
         err = self.errors(rec)
         bad = ~(err <= max_error_px)
         for iid, k in zip(self.image_ids[bad], self.point2D_idx[bad], strict=True):
             if rec.image(int(iid)).point2D(int(k)).has_point3D():
-                rec.delete_observation(int(iid), int(k))
+                delete(int(iid), int(k))
         self._keep(~bad)
         return int(bad.sum())
 

@@ -217,7 +217,7 @@ def register_new_photos(
         cache.correspondence_graph,
         priors,
         cfg.refine_max_error_px,
-        _Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg),
+        Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg),
         mopts.abs_pose_min_num_inliers,
     )
     new_ids = _register_loop(mapper, opts, mopts, guess)
@@ -235,7 +235,7 @@ def register_new_photos(
 
 
 @dataclass(frozen=True)
-class _Tolerance:
+class Tolerance:
     """How far a registered pose may lie from the robot's estimate: camera centre (m,
     horizontal) and heading (deg); 0 or less: not checked."""
 
@@ -245,7 +245,7 @@ class _Tolerance:
     def agrees(self, pose: pycolmap.Rigid3d, prior: pycolmap.Rigid3d) -> bool:
         """Whether ``pose`` lies within the tolerances of ``prior`` (both cam_from_world)."""
         if self.position_m > 0:
-            d = np.linalg.norm((_centre(pose) - _centre(prior))[:2])
+            d = np.linalg.norm((camera_centre(pose) - camera_centre(prior))[:2])
             if d > self.position_m:
                 return False
         if self.heading_deg > 0:
@@ -255,7 +255,7 @@ class _Tolerance:
         return True
 
 
-def _centre(pose: pycolmap.Rigid3d) -> np.ndarray:
+def camera_centre(pose: pycolmap.Rigid3d) -> np.ndarray:
     return -pose.rotation.matrix().T @ np.asarray(pose.translation)
 
 
@@ -285,12 +285,12 @@ class _PriorGuess:
         graph: pycolmap.CorrespondenceGraph,
         priors: dict[str, pycolmap.Rigid3d],
         max_error_px: float,
-        tolerance: _Tolerance | None = None,
+        tolerance: Tolerance | None = None,
         min_inliers: int = 30,
     ) -> None:
         self.mapper, self.graph, self.priors = mapper, graph, priors
         self.max_error_px = max_error_px
-        self.tolerance = tolerance or _Tolerance(0.0, 0.0)
+        self.tolerance = tolerance or Tolerance(0.0, 0.0)
         self.min_inliers = min_inliers
         self.taken = 0
         self.gated = 0
@@ -314,7 +314,7 @@ class _PriorGuess:
             self._set_pose(iid, pose, drop_error_px)
             self.gated += 1
             return True
-        d = float(np.linalg.norm((_centre(im.cam_from_world()) - _centre(prior))[:2]))
+        d = float(np.linalg.norm((camera_centre(im.cam_from_world()) - camera_centre(prior))[:2]))
         self.mapper.observation_manager.deregister_frame(im.frame_id)
         self.rejected.add(iid)
         self.rejected_names[im.name] = (
@@ -376,7 +376,7 @@ def pose_near_estimate(
     prior: pycolmap.Rigid3d,
     xy: np.ndarray,
     xyz: np.ndarray,
-    tolerance: _Tolerance,
+    tolerance: Tolerance,
     max_error_px: float,
     min_inliers: int,
     attempts: int = 3,
@@ -552,8 +552,8 @@ def refine_new_photos(reg: Registration, cfg: SfmConfig) -> dict:
     opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
     opts.ceres.loss_function_scale = 1.0
     opts.ceres.solver_options.function_tolerance = cfg.register_ba_function_tolerance
-    points = _points_of(rec, ids)
-    table = ObservationTable(rec, _images_of(rec, points), points)
+    points = points_of(rec, ids)
+    table = ObservationTable(rec, images_of(rec, points), points)
     for _ in range(cfg.refine_iterations if ids else 0):
         removed += filter_observations(rec, cfg.refine_max_error_px, table, points)
         config = pycolmap.BundleAdjustmentConfig()
@@ -574,7 +574,7 @@ def refine_new_photos(reg: Registration, cfg: SfmConfig) -> dict:
     }
 
 
-def _points_of(rec: pycolmap.Reconstruction, ids: list[int]) -> set[int]:
+def points_of(rec: pycolmap.Reconstruction, ids: list[int]) -> set[int]:
     """The 3D points observed by images ``ids``."""
     out: set[int] = set()
     for iid in ids:
@@ -582,7 +582,7 @@ def _points_of(rec: pycolmap.Reconstruction, ids: list[int]) -> set[int]:
     return out
 
 
-def _images_of(rec: pycolmap.Reconstruction, point_ids: set[int]) -> set[int]:
+def images_of(rec: pycolmap.Reconstruction, point_ids: set[int]) -> set[int]:
     """The images observing the 3D points ``point_ids``."""
     return {el.image_id for pid in point_ids for el in rec.point3D(pid).track.elements}
 

@@ -45,6 +45,7 @@ from scenebot.sfm.mapping import (
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.person_frame import person_frame_transform
 from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
+from scenebot.sfm.place import place_left_out_photos
 from scenebot.sfm.register import camera_xy, global_refinement_checks, map_new_photos
 
 log = logging.getLogger(__name__)
@@ -430,6 +431,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     if on_circles is not None:
         alignment = on_circles
         total_scale *= alignment.scale
+    placed = _place_left_out(s, rec, alignment, mres.dropped)
 
     _replace_model(rec, Path(outputs.model_dir))
     t = time.perf_counter()
@@ -440,6 +442,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     scale = _scale_report(first, total_scale, scale_checks)
     report = _report(s, rec, mres, features, pairs, circle_stats, scale, alignment, acc)
     report["global_refinement"] = checks
+    report["placed"] = placed
     outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
     shutil.rmtree(s.work, ignore_errors=True)
     return report
@@ -701,6 +704,21 @@ def _drop_inconsistent_photos(
             dropped.update(
                 {n: f"registered {d:.0f} deg off its compass reading" for n, d in turned.items()}
             )
+
+
+def _place_left_out(
+    s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, dropped: dict[str, str]
+) -> dict:
+    """With ``cfg.place_left_out_photos`` (a robot's photos): the photos left out placed at
+    the robot's estimate (:func:`place_left_out_photos`); report.json ``placed``."""
+    if not s.cfg.place_left_out_photos or s.person or not dropped:
+        return {}
+    t = time.perf_counter()
+    placed = place_left_out_photos(
+        rec, s.db_path, s.root, s.photos, dropped, alignment.camera_offset_m, s.cfg
+    )
+    s.timings["place"] = time.perf_counter() - t
+    return placed
 
 
 def _kept_previous(s: _Session, continued: bool) -> frozenset[str]:

@@ -1,0 +1,280 @@
+"""Photos the map left out, placed where the robot knows it took them.
+
+Repeating texture (wallpaper, parquet, tiles) folds structure from motion: a group of photos
+registers consistently one pattern period away from where it was taken, or not at all when
+the wall it shows was only ever triangulated as its copy; the stage then rightly leaves such
+photos out (:func:`~scenebot.sfm.stage.drop_misplaced`). The robot, though, knows where each
+of them was taken, to centimetres: its visual localization against the previous map, gated
+by its own odometry (``localization`` in the capture log). :func:`place_left_out_photos`
+puts such a photo at that estimate (or at the pose its map matches give near it), registers
+it, triangulates its matches with the map's photos and with the other placed photos, and
+bundle-adjusts the placed photos and their new points (the map's own points held) with a
+position prior at the estimate. A placed photo stays in the map only when enough of its
+observations agree with its pose, its group of placed photos matches enough of the map's
+own points (:func:`anchored_observations`), and the pose is still within the estimate's
+tolerances; the others leave again, with the reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from scenebot.sfm.config import SfmConfig
+from scenebot.sfm.features import open_database
+from scenebot.sfm.mapping import ObservationTable, mapping_options
+from scenebot.sfm.photos import Photo
+from scenebot.sfm.register import (
+    Tolerance,
+    camera_centre,
+    camera_priors,
+    images_of,
+    map_correspondences,
+    points_of,
+    pose_near_estimate,
+)
+
+log = logging.getLogger(__name__)
+
+
+def place_left_out_photos(
+    rec: pycolmap.Reconstruction,
+    db_path: Path,
+    image_root: Path,
+    photos: list[Photo],
+    dropped: dict[str, str],
+    camera_offset_m: tuple[float, float] | None,
+    cfg: SfmConfig,
+) -> dict:
+    """Place the photos of ``dropped`` that have a robot estimate at it and keep those the
+    map then confirms (module docstring).
+
+    Args:
+        rec: the model in the robot frame (modified: placed photos registered, their
+            points triangulated).
+        db_path: the scene database (features and matches of all ``photos``).
+        image_root: folder the photo names are relative to (point colours).
+        photos: the photo set.
+        dropped: photo name -> why it is not in the map (modified: placed photos leave
+            it; photos placed and taken out again get the reason).
+        camera_offset_m: the camera centre in the robot frame (forward, left) (m).
+        cfg: sfm settings (``place_prior_std_m``, the
+            tolerances ``max_estimate_deviation_m`` / ``max_compass_deviation_deg``,
+            ``refine_max_error_px``, ``refine_iterations``).
+
+    Returns:
+        report.json's ``placed``: ``tried``, ``kept`` (names), ``from_matches`` (photos
+        whose starting pose came from their gated map matches), ``taken_out`` (name ->
+        why), ``observations`` (name -> observations kept), ``seconds``.
+    """
+    t0 = time.perf_counter()
+    stats: dict = {
+        "tried": 0, "kept": [], "from_matches": 0, "taken_out": {}, "observations": {},
+        "anchored": {},
+    }  # fmt: skip
+    todo = [p for p in photos if p.name in dropped and p.localization is not None]
+    if not todo or rec.num_reg_images() < 2:
+        return stats | {"seconds": time.perf_counter() - t0}
+    heights = [rec.image(i).projection_center()[2] for i in rec.reg_image_ids()]
+    priors = camera_priors(todo, camera_offset_m, cfg.camera_yaw_deg, float(np.median(heights)))
+    names = [p.name for p in photos]
+    with open_database(db_path) as db:
+        cache_opts = pycolmap.DatabaseCacheOptions()
+        cache_opts.min_num_matches = cfg.min_num_matches
+        cache_opts.image_names = set(names)
+        cache = pycolmap.DatabaseCache.create(db, cache_opts)
+    opts = mapping_options(cfg, names, continuing=True, fix_focal=True)
+    mapper = pycolmap.IncrementalMapper(cache)
+    mapper.begin_reconstruction(rec)
+    tolerance = Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg)
+    min_obs = opts.get_mapper().abs_pose_min_num_inliers
+    existing = set(rec.point3D_ids())  # the map's own points: held in the adjustment
+    placed: dict[int, pycolmap.Rigid3d] = {}
+    for p in todo:
+        im = rec.find_image_with_name(p.name)
+        if im is None:  # not in the database (no features)
+            continue
+        iid = im.image_id
+        pose = _starting_pose(
+            rec, cache.correspondence_graph, iid, priors[p.name], tolerance, cfg, min_obs
+        )
+        if pose is not priors[p.name]:
+            stats["from_matches"] += 1
+        rec.frame(im.frame_id).rig_from_world = pose
+        mapper.observation_manager.register_frame(im.frame_id)
+        placed[iid] = priors[p.name]
+    stats["tried"] = len(placed)
+    tri = opts.get_triangulation()
+    for _ in range(2):  # again from the adjusted poses: tracks the first poses missed
+        for iid in placed:  # every placed photo registered first: they triangulate together
+            mapper.triangulate_image(tri, iid)
+        _adjust_placed(mapper, placed, existing, cfg)
+    anchors, group_anchors = anchored_observations(rec, set(placed), existing)
+    for iid, prior in placed.items():
+        im = rec.image(iid)
+        n_obs = im.num_points3D
+        why = _why_not_kept(
+            im.cam_from_world(), prior, n_obs, group_anchors[iid], tolerance, min_obs
+        )
+        if why:
+            mapper.observation_manager.deregister_frame(im.frame_id)
+            stats["taken_out"][im.name] = why
+            dropped[im.name] = f"{dropped[im.name]}; placed at the robot's estimate: {why}"
+            continue
+        stats["kept"].append(im.name)
+        stats["observations"][im.name] = n_obs
+        stats["anchored"][im.name] = anchors[iid]
+        dropped.pop(im.name, None)
+    mapper.end_reconstruction(False)
+    for iid in placed:
+        if rec.exists_image(iid) and rec.image(iid).has_pose:
+            rec.extract_colors_for_image(iid, str(image_root))
+    stats["seconds"] = time.perf_counter() - t0
+    if placed:
+        log.info(
+            "placed %d left-out photo(s) at the robot's estimate: %d kept, %d taken out again",
+            len(placed),
+            len(stats["kept"]),
+            len(stats["taken_out"]),
+        )
+    return stats
+
+
+def _starting_pose(
+    rec: pycolmap.Reconstruction,
+    graph: pycolmap.CorrespondenceGraph,
+    iid: int,
+    prior: pycolmap.Rigid3d,
+    tolerance: Tolerance,
+    cfg: SfmConfig,
+    min_inliers: int,
+) -> pycolmap.Rigid3d:
+    """The pose the photo's matches to map points give within the tolerances of the
+    robot's estimate (:func:`~scenebot.sfm.register.pose_near_estimate`; more exact than
+    the estimate), else the estimate itself."""
+    _, xy, xyz = map_correspondences(rec, graph, iid, every=True)
+    pose = pose_near_estimate(
+        rec.image(iid).camera, prior, xy, xyz, tolerance, cfg.refine_max_error_px,
+        min_inliers,
+    )  # fmt: skip
+    return prior if pose is None else pose
+
+
+def _adjust_placed(
+    mapper: pycolmap.IncrementalMapper,
+    placed: dict[int, pycolmap.Rigid3d],
+    existing: set[int],
+    cfg: SfmConfig,
+) -> None:
+    """``cfg.refine_iterations`` times: drop the placed photos' points' observations beyond
+    ``cfg.refine_max_error_px``, then bundle-adjust the placed photos and their points
+    (Cauchy loss, 1 px) with a position prior (``cfg.place_prior_std_m``) at the robot's
+    estimate; every other pose and the intrinsics held. Filters once more at the end
+    (through the mapper's observation manager, which keeps count for triangulation)."""
+    rec = mapper.reconstruction
+    delete = mapper.observation_manager.delete_observation
+    ids = [i for i in placed if rec.image(i).has_pose]
+    points = points_of(rec, ids)
+    if not points:
+        return
+    table = ObservationTable(rec, images_of(rec, points), points)
+    opts = pycolmap.BundleAdjustmentOptions()
+    opts.print_summary = False
+    opts.refine_focal_length = False
+    opts.refine_principal_point = False
+    opts.refine_extra_params = False
+    opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+    opts.ceres.loss_function_scale = 1.0
+    opts.ceres.solver_options.num_threads = cfg.num_threads
+    prior_opts = pycolmap.PosePriorBundleAdjustmentOptions()
+    prior_opts.prior_position_fallback_stddev = cfg.place_prior_std_m
+    cov = np.eye(3) * cfg.place_prior_std_m**2
+    for _ in range(max(cfg.refine_iterations, 1)):
+        table.delete_beyond(rec, cfg.refine_max_error_px, delete)
+        config = pycolmap.BundleAdjustmentConfig()
+        priors = []
+        for iid in ids:
+            config.add_image(iid)
+            prior = pycolmap.PosePrior()
+            prior.corr_data_id = rec.image(iid).data_id
+            prior.position = camera_centre(placed[iid])
+            prior.position_covariance = cov
+            prior.coordinate_system = pycolmap.PosePriorCoordinateSystem.CARTESIAN
+            priors.append(prior)
+        for pid in points:  # the map's own points held; new ones with every observation
+            if not rec.exists_point3D(pid):
+                continue
+            if pid in existing:
+                config.add_constant_point(pid)
+            else:
+                config.add_variable_point(pid)
+        pycolmap.create_pose_prior_bundle_adjuster(opts, prior_opts, config, priors, rec).solve()
+    table.delete_beyond(rec, cfg.refine_max_error_px, delete)
+
+
+def anchored_observations(
+    rec: pycolmap.Reconstruction, placed: set[int], existing: set[int]
+) -> tuple[dict[int, int], dict[int, int]]:
+    """How firmly the map holds each placed photo: its observations of the map's own points
+    (``existing``, held in the adjustment: a 2D-3D match as any registration counts it),
+    and those summed over its group (the placed photos connected through points they
+    share: triangulated together, such a group is one rigid body, which the map holds like
+    one camera). Points a placed photo triangulated with the map's photos do not count: a
+    pose a metre off still finds rays that meet somewhere.
+
+    Returns:
+        Image id -> its anchored observations, and image id -> its group's.
+    """
+    parent = {i: i for i in placed}
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    anchors = dict.fromkeys(placed, 0)
+    for iid in placed:
+        for p2 in rec.image(iid).get_observation_points2D():
+            track = {e.image_id for e in rec.point3D(p2.point3D_id).track.elements}
+            if p2.point3D_id in existing:
+                anchors[iid] += 1
+            for other in track & placed:
+                parent[root(other)] = root(iid)
+    group: dict[int, int] = {}
+    for iid in placed:
+        group[root(iid)] = group.get(root(iid), 0) + anchors[iid]
+    return anchors, {iid: group[root(iid)] for iid in placed}
+
+
+def _why_not_kept(
+    pose: pycolmap.Rigid3d,
+    prior: pycolmap.Rigid3d,
+    n_obs: int,
+    group_anchors: int,
+    tolerance: Tolerance,
+    min_obs: int,
+) -> str | None:
+    """Why a placed photo leaves the map again (None: it stays), ``min_obs`` being the
+    inliers the mapper asks of any registration: fewer observations agree with its pose
+    (too few to pin it to the pixel); its group holds fewer anchored observations
+    (:func:`anchored_observations`: placed photos that only see each other agree with a
+    shared error of their estimates as well as with the truth); or the adjustment moved it
+    beyond the estimate's tolerances."""
+    if n_obs < min_obs:
+        return f"{n_obs} observations agree with it (the mapper registers a photo with {min_obs})"
+    if group_anchors < min_obs:
+        return (
+            f"it and the photos placed with it share {group_anchors} observations with the "
+            f"map (the mapper registers a photo with {min_obs})"
+        )
+    if not tolerance.agrees(pose, prior):
+        return (
+            "the adjustment moved it beyond sfm.max_estimate_deviation_m / "
+            "sfm.max_compass_deviation_deg of the estimate"
+        )
+    return None
