@@ -3,9 +3,9 @@
 Per round: photos taken (and in all), photos the map registered, the best remaining score
 (``goals.json``: the largest predicted angular error of a candidate view, degrees; below
 ``goals.complete_threshold_deg`` the map is complete), and for adaptive rounds the goals
-reached, abandoned and skipped with their reasons, and for a person's guided rounds the shots
-of the previous guide its photos fulfilled (``fulfilment.json``). Why the campaign stopped: a round's
-goals said complete, or ``max_rounds`` was reached.
+reached, abandoned and skipped with their reasons, and for a person's guided rounds the
+shots of the previous guide its photos fulfilled (``fulfilment.json``). Why the campaign
+stopped: a round's goals said complete, or ``max_rounds`` was reached.
 
 Simulator only, under ``evaluation`` (never an input to a decision): how far the robot
 really stopped from each goal it reported reached (its true position mapped into the map
