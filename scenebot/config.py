@@ -372,6 +372,9 @@ ROBOT_SECTIONS: dict[str, tuple[str, ...]] = {
 }
 """The config sections each ``robot:`` backend reads."""
 
+GUIDED_EXHAUSTIVE_MAX_IMAGES = 250
+"""sfm.exhaustive_max_images of a guided campaign unless set: a person's new photos have no
+position to pair them by, so all pairs are matched up to the photo budget."""
 PERSON_ROBOTS = ("photos", "guided", "person-sim")
 """The backends whose photos are a person's: six degrees of freedom, the person's frame."""
 GUIDED_ROBOTS = ("guided", "person-sim")
@@ -481,6 +484,23 @@ class Config(Settings):
         ):
             sfm = SfmConfig(**{**self.sfm.model_dump(), "camera_offset_m": offset})
             object.__setattr__(self, "sfm", sfm)
+        return self
+
+    @model_validator(mode="after")
+    def _person_pairs(self, info: ValidationInfo) -> Config:
+        """A guided round's photos have no position to choose their match partners by (no
+        odometry, no localization, no compass): unless set, every pair is matched up to
+        ``GUIDED_EXHAUSTIVE_MAX_IMAGES`` photos (the campaign's photo budget)."""
+        if not _received(info, "sfm"):
+            return self
+        sfm = self.sfm
+        if (
+            self.guided_rounds()
+            and "exhaustive_max_images" not in sfm.model_fields_set
+            and sfm.exhaustive_max_images != GUIDED_EXHAUSTIVE_MAX_IMAGES
+        ):
+            update = {"exhaustive_max_images": GUIDED_EXHAUSTIVE_MAX_IMAGES}
+            object.__setattr__(self, "sfm", SfmConfig(**{**sfm.model_dump(), **update}))
         return self
 
     def robot_sections(self) -> tuple[str, ...]:

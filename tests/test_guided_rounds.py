@@ -232,3 +232,12 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
     assert doc["summary"] == {"shots": 2, "fulfilled": 1, "photos": 3, "registered": 2,
                               "fulfilling_none": 1, "not_registered": 1}  # fmt: skip
     assert doc["messages"] == [off["message"], lost["message"]]
+
+
+def test_a_guided_campaign_matches_all_pairs_unless_told_otherwise():
+    from scenebot.config import GUIDED_EXHAUSTIVE_MAX_IMAGES
+
+    assert Config(robot="person-sim").sfm.exhaustive_max_images == GUIDED_EXHAUSTIVE_MAX_IMAGES
+    assert Config().sfm.exhaustive_max_images == 40  # the robot pairs by its positions
+    told = Config(robot="person-sim", sfm={"exhaustive_max_images": 60})
+    assert told.sfm.exhaustive_max_images == 60
