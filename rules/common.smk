@@ -270,6 +270,15 @@ SCENE_TRUTH = SIMULATED or (REFERENCE and CFG.evaluate.reference_world)
 EVALUATED = SIMULATED or REFERENCE
 
 
+def fulfilments_until(wildcards):
+    """Guided rounds: the fulfilment.json of rounds 1..r (the evaluation reports the shots
+    fulfilled)."""
+    r = int(wildcards.r) if hasattr(wildcards, "r") else last_round_index(wildcards)
+    return (
+        [f"{round_dir(k)}/fulfilment.json" for k in range(1, r + 1)] if GUIDED else []
+    )
+
+
 def observable_input(wildcards):
     """The observable surface, where the true scene is known."""
     return [f"{RESULTS}/eval/observable_surface.npz"] if SCENE_TRUTH else []

@@ -49,8 +49,11 @@ def test_round_zero_is_the_walk_with_its_truth_and_a_metric_map(campaign):
     log = campaign / "round_000" / "capture" / "log.jsonl"
     photos = photo_records(log)
     assert len(photos) == 32 and all("truth" in p for p in photos)
-    heights = {round(p["truth"]["center"][2], 6) for p in photos}
-    assert len(heights) == 1 and 1.2 <= heights.pop() <= 1.8  # the person's eye height
+    (session,) = [r for r in read_log(log) if r.get("type") == "session"]
+    eye = session["eye_height_m"]  # the person's own, drawn once per campaign
+    assert 1.2 <= eye <= 1.8
+    heights = np.array([p["truth"]["center"][2] for p in photos])
+    assert np.all(np.abs(heights - eye) < 4 * 0.05)  # person_sim.height_std_m
     (tape,) = [r for r in read_log(log) if r.get("event") == "known_distance"]
     a, b = (np.array(p["truth"]["center"]) for p in photos if p["image"] in
             (tape["image_a"], tape["image_b"]))  # fmt: skip
@@ -73,7 +76,7 @@ def test_round_one_takes_the_guides_shots_from_the_inbox(campaign):
     assert len(photos) == len(taken)
     for s, p in zip(taken, photos, strict=True):
         inbox_photo = cap / "inbox" / s["image"]
-        assert p["source"] == str(inbox_photo)
+        assert p["source"] == f"inbox/{s['image']}"
         data = (cap / p["image"]).read_bytes()
         assert data == inbox_photo.read_bytes()  # copied, the inbox photo left as it was
         assert p["sha256"] == hashlib.sha256(data).hexdigest()

@@ -107,6 +107,15 @@ def earlier_hashes(scene_dir: Path, round_index: int) -> dict[str, str]:
     return out
 
 
+def _source(src: Path, capture_dir: Path) -> str:
+    """Where a photo came from, for its record: relative to the capture folder for the
+    round's inbox (``inbox/IMG_0042.jpg``, as ``image`` is), else the path as given."""
+    try:
+        return Path(src).resolve().relative_to(Path(capture_dir).resolve()).as_posix()
+    except ValueError:
+        return str(src)
+
+
 def _label(name: str, source: str | None) -> str:
     """A photo as the person knows it (its file name) and as the map names it."""
     return f"{Path(source).name} ({name})" if source else name
@@ -179,14 +188,15 @@ def intake(
             log.warning("%s: %s; left out of round %d (the file stays where it is)",
                         src, problem, round_index)  # fmt: skip
             clog.write({"type": "event", "t": float(n), "event": "photo_left_out",
-                        "source": str(src), "reason": problem})  # fmt: skip
+                        "source": _source(src, capture_dir), "reason": problem})  # fmt: skip
             continue
+        source = _source(src, capture_dir)
         suffix = ".png" if src.suffix.lower() == ".png" else ".jpg"
         image = f"images/r{round_index:03d}_{n:04d}{suffix}"
         _copy_photo(src, capture_dir / image)
-        seen[digest] = _label(f"round_{round_index:03d}/capture/{image}", str(src))
+        seen[digest] = _label(f"round_{round_index:03d}/capture/{image}", source)
         record = {"type": "photo", "t": float(n), "index": n, "image": image,
-                  "source": str(src), "sha256": digest}  # fmt: skip
+                  "source": source, "sha256": digest}  # fmt: skip
         record.update((extra or {}).get(src.name, {}))
         clog.write(record)
         n += 1
