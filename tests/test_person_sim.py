@@ -71,12 +71,23 @@ def test_it_stands_in_the_room_but_not_in_the_table_or_outside(scene):
     assert not p.can_stand((-3.0, 40.0))  # off the map
 
 
-def test_a_shot_it_cannot_stand_at_is_skipped_and_named(scene):
-    p = person(scene)
+def test_a_shot_it_cannot_reach_is_skipped_and_named(scene):
+    p = person(scene)  # reach_m 0.5: the table's middle is 0.65 m from where it fits
     shot = p.shoot(ShotPose(np.array([2.9, 1.4, 1.5]), 0.0, 0.0))
     assert shot.taken is None and "(2.90, 1.40)" in shot.skipped
+    assert "reach_m = 0.5" in shot.skipped
     shot = p.shoot(ShotPose(np.array([6.0, 1.5, 1.5]), 0.0, 0.0))
     assert shot.taken is None and "outside the room" in shot.skipped
+
+
+def test_it_holds_the_camera_out_over_the_table_but_not_into_it(scene):
+    p = person(scene, reach_m=0.8, position_std_m=0.0, height_std_m=0.0)
+    over = p.shoot(ShotPose(np.array([2.9, 1.4, 1.5]), 0.0, 0.0))
+    assert np.allclose(over.taken.center, [2.9, 1.4, 1.5])
+    stood = np.array(over.extra["stood_at"])
+    assert p.can_stand(stood) and 0.6 < np.linalg.norm(stood - [2.9, 1.4]) <= 0.8
+    into = p.shoot(ShotPose(np.array([2.9, 1.4, 0.5]), 0.0, 0.0))  # below the table top
+    assert into.taken is None and "inside or behind furniture" in into.skipped
 
 
 def test_the_errors_follow_the_settings(scene):

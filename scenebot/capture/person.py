@@ -371,7 +371,7 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
             want = type(aimed)(aimed.center, aimed.heading + offset, aimed.pitch)
             shot = person.shoot(want)
             rec = {"type": "shot", "aimed_shot": g["rank"], "photo_of_shot": j,
-                   "aimed": _pose_dict(want)}  # fmt: skip
+                   "aimed": _pose_dict(want), **shot.extra}  # fmt: skip
             if shot.taken is None:
                 rec["skipped"] = shot.skipped
                 log.info("shot %d skipped: %s", g["rank"], shot.skipped)

@@ -68,8 +68,14 @@ class PersonSimConfig(Settings):
         0.25,
         gt=0,
         description="The person's half width (m): a spot closer than this to furniture or "
-        "walls (between 0.1 m and 1.5 m above the floor) cannot be stood on; a shot whose "
-        "spot cannot be stood on, or lies outside the room, is skipped.",
+        "walls (between 0.1 m and 1.5 m above the floor) cannot be stood on.",
+    )
+    reach_m: float = Field(
+        0.5,
+        ge=0,
+        description="How far (m) the person holds the camera out from where it stands (over "
+        "a desk or a sofa); a shot with no spot to stand on within this, or inside or behind "
+        "furniture from there, is skipped.",
     )
     tape_photos: list[int] = Field(
         default_factory=lambda: [0, 5],

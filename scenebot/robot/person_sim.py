@@ -6,8 +6,9 @@ person walks to each shot of the previous round's guide and takes it with a pers
 (:meth:`SimPerson.shoot`): about ``person_sim.position_std_m`` off where the shot is,
 ``heading_std_deg`` off its heading, at a height it can hold the camera (its own eye height,
 drawn once per campaign from ``eye_height_m``, crouched down to ``lowest_m`` or raised by
-``reach_up_m``), tilted as asked plus ``pitch_std_deg``. Shots it cannot stand at (inside
-furniture, outside the room) it skips.
+``reach_up_m``), tilted as asked plus ``pitch_std_deg``, holding the camera out up to
+``reach_m`` from where it can stand. Shots it cannot reach (outside the room, inside
+furniture) it skips.
 
 The person may use the simulated world's geometry (where it can stand) and where it truly
 stood for its own earlier photos (to read the guide's map: :func:`map_to_world`); nothing
@@ -129,11 +130,10 @@ class SimPerson:
         rr, cc = np.nonzero(win >= self.cfg.clearance_m)
         if len(rr) == 0:
             return None
-        d2 = (rr + r0 - r) ** 2 + (cc + c0 - c) ** 2
-        j = int(np.argmin(d2))
-        if d2[j] * self.map.res**2 > max_m**2:
-            return None
-        return self.map.origin + np.array([cc[j] + c0, rr[j] + r0]) * self.map.res
+        spots = self.map.origin + np.column_stack([cc + c0, rr + r0]) * self.map.res
+        d = np.linalg.norm(spots - np.asarray(xy, float), axis=1)  # from xy, not its cell
+        j = int(np.argmin(d))
+        return spots[j] if d[j] <= max_m else None
 
     def camera_height_range(self) -> tuple[float, float]:
         """Lowest and highest camera height (m, world z) the person can hold the camera at."""
@@ -142,47 +142,73 @@ class SimPerson:
 
     # ------------------------------------------------------------------------- shooting
     def shoot(self, aimed: ShotPose) -> Shot:
-        """Walk to the shot ``aimed`` (world) and take it as a person does: the error of
-        the settings around it; skipped when its spot cannot be stood on (named)."""
+        """Walk to the shot ``aimed`` (world) and take it as a person does: stand where it
+        fits nearest the shot (within ``reach_m``: the camera held out over a desk or a
+        sofa), with the error of the settings around it; skipped, with the reason, when no
+        such spot is near or the shot's spot lies inside or behind furniture from there."""
         cfg = self.cfg
         xy = np.asarray(aimed.center[:2], float)
-        if not self.can_stand(xy):
+        stand0 = self.nearest_standable(xy, cfg.reach_m)
+        if stand0 is None:
             lo, hi = self.scene.bounds
             where = (
                 "outside the room"
                 if np.any(xy < lo[:2]) or np.any(xy > hi[:2])
-                else f"outside the room, inside furniture or within person_sim.clearance_m = "
-                f"{cfg.clearance_m} m of it"
+                else "outside the room or in furniture: no spot the person fits (person_sim."
+                f"clearance_m = {cfg.clearance_m} m) within person_sim.reach_m = "
+                f"{cfg.reach_m} m of it"
             )
             return Shot(aimed, skipped=f"the spot ({xy[0]:.2f}, {xy[1]:.2f}) m is {where}")
+        arm = xy - stand0  # the camera held out this far from where the person stands
         for _ in range(20):  # a person does not step into the furniture: stand elsewhere
-            stand = xy + self.rng.normal(0.0, cfg.position_std_m, 2)
-            if self.can_stand(stand):
+            cam_xy = xy + self.rng.normal(0.0, cfg.position_std_m, 2)
+            if self.can_stand(cam_xy - arm):
                 break
         else:
-            stand = xy
+            cam_xy = xy
+        stand = cam_xy - arm
         lo, hi = self.camera_height_range()
         z = float(np.clip(aimed.center[2], lo, hi) + self.rng.normal(0.0, cfg.height_std_m))
         z = float(np.clip(z, lo, hi))
+        if self._blocked(np.array([stand[0], stand[1], z]), np.array([cam_xy[0], cam_xy[1], z])):
+            return Shot(
+                aimed,
+                skipped=f"the spot ({xy[0]:.2f}, {xy[1]:.2f}, {z:.2f}) m is inside or behind "
+                f"furniture from where the person can stand ({stand[0]:.2f}, {stand[1]:.2f})",
+            )
         pitch = aimed.pitch + math.radians(self.rng.normal(0.0, cfg.pitch_std_deg))
         taken = ShotPose(
-            np.array([stand[0], stand[1], z]),
+            np.array([cam_xy[0], cam_xy[1], z]),
             aimed.heading + math.radians(self.rng.normal(0.0, cfg.heading_std_deg)),
             float(np.clip(pitch, -math.radians(89), math.radians(89))),
             math.radians(self.rng.normal(0.0, cfg.roll_std_deg)),
         )
-        return Shot(aimed, taken)
+        return Shot(aimed, taken, extra={"stood_at": [float(stand[0]), float(stand[1])]})
+
+    def _blocked(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether geometry lies between the points ``a`` and ``b`` (the person's arm)."""
+        d = b - a
+        n = float(np.linalg.norm(d))
+        if n < 1e-6:
+            return False
+        hit = self.renderer().cast(a[None], (d / n)[None])
+        return bool(hit["t"][0] < n)
+
+    def renderer(self):
+        """The simulator's renderer of the scene (made on first use)."""
+        if self._renderer is None:
+            cam = self.camera
+            self._renderer = self._renderer_cls(
+                self.scene, noise_sigma=cam.noise_sigma, antialias=cam.antialias
+            )
+        return self._renderer
 
     def take(self, pose: ShotPose, dest: Path) -> dict:
         """Render the photo of ``pose`` into ``dest`` (a JPEG with EXIF focal length, stored
         atomically and never over a file) and return its ``truth`` record (capture log)."""
         cam = self.camera
-        if self._renderer is None:
-            self._renderer = self._renderer_cls(
-                self.scene, noise_sigma=cam.noise_sigma, antialias=cam.antialias
-            )
         R = pose.rotation()
-        rgb = self._renderer.render(self.intrinsics, R, pose.center, self.rng)
+        rgb = self.renderer().render(self.intrinsics, R, pose.center, self.rng)
         store_photo(
             Path(dest),
             lambda tmp: write_jpeg(
