@@ -241,3 +241,24 @@ def test_a_guided_campaign_matches_all_pairs_unless_told_otherwise():
     assert Config().sfm.exhaustive_max_images == 40  # the robot pairs by its positions
     told = Config(robot="person-sim", sfm={"exhaustive_max_images": 60})
     assert told.sfm.exhaustive_max_images == 60
+
+
+def test_settings_name_a_guided_photo_as_the_person_named_it():
+    """sfm.known_distance and sfm.up_photo name the folder's files (IMG_0003.jpg); a guided
+    campaign's round 0 holds them as round_000/capture/images/r000_NNNN.jpg."""
+    from types import SimpleNamespace
+
+    from scenebot.sfm.photos import Photo
+    from scenebot.sfm.stage import _person_known_distance, _person_photo_name
+
+    photos = [
+        Photo(f"round_000/capture/images/r000_000{k}.jpg", None, source=f"/x/IMG_000{k + 3}.jpg")
+        for k in range(3)
+    ]
+    s = SimpleNamespace(photos=photos, names=[p.name for p in photos], capture_dirs=[])
+    assert _person_photo_name(s, "IMG_0004.jpg") == "round_000/capture/images/r000_0001.jpg"
+    assert _person_photo_name(s, photos[2].name) == photos[2].name
+    assert _person_known_distance(s, ("IMG_0003.jpg", "IMG_0005.jpg", 2.5)) == (
+        photos[0].name, photos[2].name, 2.5,
+    )  # fmt: skip
+    assert _person_known_distance(s, None) is None

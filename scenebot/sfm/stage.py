@@ -657,7 +657,7 @@ def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, 
             mres.reconstruction,
             s.photos,
             known_distance=known,
-            up_photo=(up.image, up.side) if up else None,
+            up_photo=(_person_photo_name(s, up.image), up.side) if up else None,
         )
         s.timings["align"] = time.perf_counter() - t
         return mres, alignment, []
@@ -680,13 +680,17 @@ def _person_known_distance(
     else the tape measurement in the capture logs (``robot: person-sim``)."""
     if known is None:
         return logged_known_distance(s.capture_dirs) if s.capture_dirs else None
-    by_source = {Path(p.source).name: p.name for p in s.photos if p.source}
     a, b, d = known
+    return _person_photo_name(s, a), _person_photo_name(s, b), d
 
-    def name(n: str) -> str:
-        return n if n in s.names else by_source.get(n, n)
 
-    return name(a), name(b), d
+def _person_photo_name(s: _Session, name: str) -> str:
+    """A photo named in a setting as the map names it: a photo folder's file taken into a
+    guided campaign's round 0 (``IMG_0001.jpg``) is ``round_000/capture/images/r000_...``."""
+    if name in s.names:
+        return name
+    by_source = {Path(p.source).name: p.name for p in s.photos if p.source}
+    return by_source.get(name, name)
 
 
 def _log_not_in_map(dropped: dict[str, str]) -> None:
