@@ -172,6 +172,11 @@ def test_it_reads_the_guides_map_through_its_own_photos():
     assert w.heading == pytest.approx(0.3 + ang) and w.pitch == pytest.approx(-0.2)
     with pytest.raises(ValueError, match="needs 3"):
         map_to_world(in_map[:2], world[:2])
+    # photos registered metres off do not mislead it
+    off = in_map.copy()
+    off[:4] += rng.uniform(2, 5, (4, 3)) / s
+    s3, R3, t3 = map_to_world(off, world)
+    assert s3 == pytest.approx(s) and np.allclose(R3, R) and np.allclose(t3, t)
     s2, R2, t2 = similarity_fit(in_map, world)
     assert np.allclose(s2 * in_map @ R2.T + t2, world)
 

@@ -39,6 +39,11 @@ STEP_ASIDE_M = 1.5
 """A spot of the walk inside furniture moves to the nearest spot the person fits, at most
 this far (m); else the photo is not taken."""
 MAP_RES_M = 0.01
+RECOGNISE_M = 0.25
+"""A photo of the map agrees with the person's reading when it lies within this (m) of where
+the person truly took it."""
+RANSAC_TRIES = 300
+"""Minimal sets of three photos tried when reading the map."""
 TANGENT_SPAN_M = 1.0
 """The walk's direction at a photo is taken over this much of it (m)."""
 """Cell size (m) of the person's map of where it can stand."""
@@ -301,21 +306,41 @@ def resample_closed(line: np.ndarray, n: int) -> np.ndarray:
 # ------------------------------------------------------------- reading the guide's map
 
 
-def map_to_world(map_centers: np.ndarray, true_centers: np.ndarray):
+def map_to_world(
+    map_centers: np.ndarray,
+    true_centers: np.ndarray,
+    inlier_m: float = RECOGNISE_M,
+    seed: int = 0,
+):
     """The person's reading of the guide's map: the similarity from the map frame to the
     world fitted on where its own photos registered and where it truly took them (a person
-    recognises the places of its own photos). Returns ``(s, R, t)``
+    recognises the places of its own photos). A map can hold photos registered metres off
+    (a repeated texture, a folded run of photos); the person is not fooled by a few of them:
+    the fit is the one most photos agree with within ``inlier_m`` (m, world), from minimal
+    sets of three (RANSAC), refitted on those. Returns ``(s, R, t)``
     (:func:`~scenebot.geometry.similarity_fit`).
 
     Raises:
         ValueError: fewer than 3 photos in common.
     """
-    if len(map_centers) < 3:
+    src, dst = np.asarray(map_centers, float), np.asarray(true_centers, float)
+    if len(src) < 3:
         raise ValueError(
-            f"the person recognises only {len(map_centers)} of its photos in the map: it "
+            f"the person recognises only {len(src)} of its photos in the map: it "
             "needs 3 to read the guide's map"
         )
-    return similarity_fit(np.asarray(map_centers, float), np.asarray(true_centers, float))
+    rng = np.random.default_rng(seed)
+    best = np.ones(len(src), bool)
+    best_n = 0
+    for _ in range(RANSAC_TRIES if len(src) > 3 else 1):
+        pick = rng.choice(len(src), 3, replace=False) if len(src) > 3 else np.arange(3)
+        s, R, t = similarity_fit(src[pick], dst[pick])
+        inl = np.linalg.norm(s * src @ R.T + t - dst, axis=1) <= inlier_m
+        if inl.sum() > best_n:
+            best, best_n = inl, int(inl.sum())
+    if best_n < 3:
+        best = np.ones(len(src), bool)
+    return similarity_fit(src[best], dst[best])
 
 
 def shot_in_world(goal: dict, sim) -> ShotPose:
