@@ -4,6 +4,8 @@
 
 
 rule capture_round0:
+    input:
+        photos=round0_photos,  # robot: guided: the person's folder
     output:
         log=f"{RESULTS}/round_000/capture/log.jsonl",
         trajectory=report(
@@ -30,7 +32,8 @@ rule capture_round0:
         "2> >(tee {log:q} >&2)"
 
 
-# Rounds >= 1: drive to the previous round's goals, localizing visually, and take photos there.
+# Rounds >= 1: drive to the previous round's goals, localizing visually, and take photos there;
+# a guided round (robot: guided, person-sim) takes in the photos of its inbox instead.
 rule capture_adaptive:
     input:
         previous=previous_round,
@@ -55,16 +58,36 @@ rule capture_adaptive:
         robot=1,
     params:
         py=PY,
-        cfg=stage_params(
-            "exploration",
-            *CFG.robot_sections(),
-            "follow",
-            "adaptive",
-            "localize",
-            "plan",
-        ),
+        cfg=stage_params(*adaptive_capture_sections()),
         out=lambda w, output: Path(output.log).parent,
         previous=lambda w: round_dir(int(w.r) - 1),
     shell:
         "{params.py:q} -m scenebot capture --params {params.cfg:q} --out {params.out:q} "
         "--round {wildcards.r} --previous {params.previous:q} 2> >(tee {log:q} >&2)"
+
+
+# robot: person-sim: the simulated person walks to the shots of round r-1's guide and puts its
+# photos in round r's inbox, as a person would (then capture_adaptive takes them in).
+rule person_sim:
+    input:
+        previous=person_sim_inputs,
+    output:
+        f"{RESULTS}/round_{{r}}/capture/inbox/person-sim.jsonl",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/person_sim.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/person_sim.tsv"
+    wildcard_constraints:
+        r=r"(?!000)\d{3}",
+    localrule: True
+    conda:
+        "../envs/scenebot.yaml"
+    resources:
+        robot=1,
+    params:
+        py=PY,
+        cfg=stage_params(*CFG.robot_sections()),
+        scene_dir=lambda w, output: Path(output[0]).parents[3],
+    shell:
+        "{params.py:q} -m scenebot person-sim --params {params.cfg:q} "
+        "--scene-dir {params.scene_dir:q} --round {wildcards.r} 2> >(tee {log:q} >&2)"

@@ -57,6 +57,11 @@ def stage_params(*sections):
 
 
 PHOTOS = CFG.robot == "photos"  # bring-your-own photos: round 0 is a folder, no robot
+PERSON = (
+    CFG.person_photos()
+)  # a person's photos (photos, guided, person-sim): 6 DoF, shots
+GUIDED = CFG.guided_rounds()  # guided rounds: each round's photos from its inbox
+PERSON_SIM = CFG.robot == "person-sim"  # the simulated person fills the inbox
 
 
 def campaign_targets(wildcards):
@@ -85,12 +90,20 @@ def campaign_rounds():
     rounds = [0]
     while len(rounds) < CFG.round_limit():
         r = f"{rounds[-1]:03d}"
-        checkpoints.plan.get(r=r)
+        round_checkpoint(r)
         goals = Path(f"{RESULTS}/round_{r}/goals.json")
         if json.loads(goals.read_text(encoding="utf-8"))["complete"]:
             break
         rounds.append(rounds[-1] + 1)
     return rounds
+
+
+def round_checkpoint(r):
+    """The last decision of round ``r`` (a checkpoint): the plan of a robot's round, the
+    guide page of a guided round (a person follows it)."""
+    if GUIDED:
+        return checkpoints.guide.get(r=r)
+    return checkpoints.plan.get(r=r)
 
 
 def round_products(wildcards):
@@ -102,11 +115,15 @@ def round_products(wildcards):
             files += [f"{d}/capture/log.jsonl", f"{d}/capture/trajectory.png"]
         files += [f"{d}/sfm/{f}" for f in ("report.json", "map.png")]
         files += [f"{d}/{f}" for f in ("goals.json", "goals.png")]
-        if PHOTOS:  # each advised shot rendered from the photos (rule goals_preview)
+        if PERSON:  # each advised shot rendered from the photos (rule goals_preview)
             files.append(f"{d}/goals_preview.png")
             # the person's guide page (rule guide)
             files.append(f"{d}/guide/index.html")
-        if not PHOTOS:  # a person's photos: no robot to plan paths for
+        if (
+            GUIDED and r > 0
+        ):  # the shots of the previous guide this round's photos fulfilled
+            files.append(f"{d}/fulfilment.json")
+        if not PERSON:  # a person's photos: no robot to plan paths for
             files += [f"{d}/{f}" for f in ("paths.json", "navgrid.png")]
     return files
 
@@ -122,8 +139,56 @@ def previous_round(wildcards):
     a map or a decision later never re-takes round r's photos; re-taking round r-1 does.
     """
     prev = f"{int(wildcards.r) - 1:03d}"
-    checkpoints.plan.get(r=prev)
-    return [f"{RESULTS}/round_{prev}/capture/log.jsonl"]
+    round_checkpoint(prev)
+    return [f"{RESULTS}/round_{prev}/capture/log.jsonl"] + inbox_input(wildcards)
+
+
+def inbox_input(wildcards):
+    """A guided round's photos, in its inbox (the round's capture takes them in): the person's
+    photos there now (a photo added later re-takes the round), or the simulated person's
+    record of its shots (rule person_sim). Empty for a robot's round."""
+    if not GUIDED:
+        return []
+    inbox = f"{RESULTS}/round_{wildcards.r}/capture/inbox"
+    if PERSON_SIM:
+        return [f"{inbox}/person-sim.jsonl"]
+    return [str(p) for p in photo_files(inbox)]
+
+
+def round0_photos(wildcards):
+    """robot: guided: the photo folder that round 0 takes in (a change re-takes it)."""
+    return (
+        [str(p) for p in photo_files(CFG.photos.folder)]
+        if CFG.robot == "guided"
+        else []
+    )
+
+
+def person_sim_inputs(wildcards):
+    """What the simulated person of round r reads: round r-1's guide (the checkpoint), shots
+    and map, and the logs of its own earlier photos (where it truly took them)."""
+    r = int(wildcards.r)
+    prev = round_dir(r - 1)
+    round_checkpoint(f"{r - 1:03d}")
+    return (
+        [f"{prev}/goals.json", f"{prev}/guide/index.html"]
+        + [f"{prev}/sfm/{f}" for f in MODEL_FILES]
+        + [f"{round_dir(k)}/capture/log.jsonl" for k in range(r)]
+    )
+
+
+def adaptive_capture_sections():
+    """The config sections an adaptive round's capture reads (a change re-takes it)."""
+    if GUIDED:
+        return CFG.robot_sections()
+    return (
+        "exploration",
+        *CFG.robot_sections(),
+        "follow",
+        "adaptive",
+        "localize",
+        "plan",
+    )
 
 
 def previous_goals(wildcards):
@@ -140,7 +205,7 @@ def adaptive_logs_until(wildcards):
     r = int(wildcards.r)
     return (
         []
-        if PHOTOS
+        if PERSON
         else [f"{RESULTS}/round_{k:03d}/capture/log.jsonl" for k in range(1, r + 1)]
     )
 
@@ -148,7 +213,7 @@ def adaptive_logs_until(wildcards):
 def person_mesh(wildcards):
     """The round's mesh for the goals stage of a person's photos (its coverage picture:
     how many photos saw each part of the surface); a robot's goals do not read it."""
-    return [f"{round_dir(wildcards.r)}/mesh.ply"] if PHOTOS else []
+    return [f"{round_dir(wildcards.r)}/mesh.ply"] if PERSON else []
 
 
 def captures_until(wildcards):
@@ -193,12 +258,25 @@ def last_round_freespace(wildcards):
     return f"{round_dir(campaign_rounds()[-1])}/freespace.npz"
 
 
-SIMULATED = CFG.robot in ("sim", "nxt-emulated")  # the true scene is known
+SIMULATED = CFG.robot in (
+    "sim",
+    "nxt-emulated",
+    "person-sim",
+)  # the true scene is known
 # bring-your-own photos with their true cameras (evaluate.reference_cameras), and the scene
 # they were taken in (evaluate.reference_world): evaluated as far as the truth given allows
 REFERENCE = PHOTOS and CFG.evaluate.reference_cameras is not None
 SCENE_TRUTH = SIMULATED or (REFERENCE and CFG.evaluate.reference_world)
 EVALUATED = SIMULATED or REFERENCE
+
+
+def fulfilments_until(wildcards):
+    """Guided rounds: the fulfilment.json of rounds 1..r (the evaluation reports the shots
+    fulfilled)."""
+    r = int(wildcards.r) if hasattr(wildcards, "r") else last_round_index(wildcards)
+    return (
+        [f"{round_dir(k)}/fulfilment.json" for k in range(1, r + 1)] if GUIDED else []
+    )
 
 
 def observable_input(wildcards):

@@ -57,6 +57,7 @@ rule evaluate:
         model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
         captures=captures_until,
         reference=reference_input,
+        fulfilment=fulfilments_until,
     output:
         json=f"{RESULTS}/round_{{r}}/evaluation.json",
         png=report(
@@ -91,6 +92,7 @@ rule evaluate_final:
         captures=captures_of_campaign,
         observable=observable_input,
         reference=reference_input,
+        fulfilment=fulfilments_until,
         dense=f"{RESULTS}/final/dense/fused.ply",
     output:
         json=f"{RESULTS}/final/evaluation.json",

@@ -192,11 +192,12 @@ rule goals_preview:
         "--preview-npz {output.tiles:q} 2> >(tee {log:q} >&2)"
 
 
-# robot: photos: the guide page of the round (round_XXX/guide/index.html, static, every asset
+# a person's photos (robot: photos, guided, person-sim): the guide page of the round (round_XXX/guide/index.html, static, every asset
 # inline): the map from above and the side with the next shots as frusta, per shot its
 # preview, the photo to start from and the step from there, the predicted gain; the coverage
 # picture. `scenebot guide serve` shows it on a phone and takes the photos back.
-rule guide:
+# A checkpoint: the last decision of a guided round (the next round's capture waits for it).
+checkpoint guide:
     input:
         code=stage_code("guide-page"),
         assets=GUIDE_ASSETS,
@@ -262,3 +263,37 @@ checkpoint plan:
         "{params.py:q} -m scenebot plan --params {params.cfg:q} --sfm-dir {params.sfm:q} "
         "--goals-json {input.goals:q} --navgrid-npz {output.navgrid:q} "
         "--paths-json {output.paths:q} --plot-png {output.picture:q} 2> >(tee {log:q} >&2)"
+
+
+# Guided rounds (robot: guided, person-sim): which shots of the previous round's guide each
+# photo of round r fulfilled (pose within guide.fulfil_*), the photos that fulfilled none or
+# did not register named (they stay in the map, or out of it, as the sfm stage decided).
+rule fulfilment:
+    input:
+        code=stage_code("guide-fulfilment"),
+        model=expand(f"{RESULTS}/round_{{{{r}}}}/sfm/{{f}}", f=MODEL_FILES),
+        report=f"{RESULTS}/round_{{r}}/sfm/report.json",
+        previous=lambda w: [f"{round_dir(int(w.r) - 1)}/sfm/{f}" for f in MODEL_FILES],
+        goals=lambda w: f"{round_dir(int(w.r) - 1)}/goals.json",
+        log=f"{RESULTS}/round_{{r}}/capture/log.jsonl",
+    output:
+        json=f"{RESULTS}/round_{{r}}/fulfilment.json",
+    log:
+        f"{RESULTS}/logs/round_{{r}}/fulfilment.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/round_{{r}}/fulfilment.tsv"
+    wildcard_constraints:
+        r=r"(?!000)\d{3}",
+    conda:
+        "../envs/scenebot.yaml"
+    params:
+        py=PY,
+        cfg=stage_params("guide"),
+        sfm=lambda w, input: Path(input.model[0]).parent,
+        previous=lambda w, input: Path(input.previous[0]).parent,
+    shell:
+        "{params.py:q} -m scenebot guide fulfilment --params {params.cfg:q} "
+        "--sfm-dir {params.sfm:q} --previous-sfm-dir {params.previous:q} "
+        "--goals-json {input.goals:q} --capture-log {input.log:q} "
+        "--sfm-report {input.report:q} --fulfilment-json {output.json:q} "
+        "2> >(tee {log:q} >&2)"

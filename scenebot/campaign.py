@@ -3,8 +3,9 @@
 Per round: photos taken (and in all), photos the map registered, the best remaining score
 (``goals.json``: the largest predicted angular error of a candidate view, degrees; below
 ``goals.complete_threshold_deg`` the map is complete), and for adaptive rounds the goals
-reached, abandoned and skipped with their reasons. Why the campaign stopped: a round's
-goals said complete, or ``max_rounds`` was reached.
+reached, abandoned and skipped with their reasons, and for a person's guided rounds the
+shots of the previous guide its photos fulfilled (``fulfilment.json``). Why the campaign
+stopped: a round's goals said complete, or ``max_rounds`` was reached.
 
 Simulator only, under ``evaluation`` (never an input to a decision): how far the robot
 really stopped from each goal it reported reached (its true position mapped into the map
@@ -129,6 +130,9 @@ def summarize(scene_dir: Path, rounds: list[int], max_rounds: int, reach_m: floa
             "complete_because": goals.get("complete_because"),
             "goals_chosen": len(goals.get("goals", [])),
         }
+        fulfilment = _load(rd / "fulfilment.json")  # a guided round: the guide's shots
+        if fulfilment is not None:
+            entry["shots_fulfilled"] = fulfilment["summary"]
         acc = _load(rd / "sfm" / "accuracy.json")
         if acc and acc.get("evaluated"):
             entry["sfm_position_error_cm_median"] = acc["position_error_cm"]["median"]

@@ -31,6 +31,17 @@ def cmd_capture(args) -> int:
     from scenebot.capture.stage import run_capture
 
     cfg = _config(args)
+    if cfg.guided_rounds():  # a person's round: the folder, the walk, or the inbox
+        from scenebot.capture import person
+
+        if args.round > 0:
+            summary = person.run_inbox_round(cfg, Path(args.out), args.round)
+        elif cfg.robot == "guided":
+            summary = person.run_folder_round(cfg, Path(args.out))
+        else:
+            summary = person.run_perimeter_round(cfg, Path(args.out))
+        print(json.dumps(summary, default=str))
+        return 0
     if args.round > 0:
         from scenebot.capture.adaptive import run_adaptive
 
@@ -61,6 +72,8 @@ STAGE_FILES = {
     "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png", "preview_npz?"),
     "guide-page": ("sfm_dir", "image_dir", "goals_json", "preview_npz", "coverage_png",
                    "guide_html"),
+    "guide-fulfilment": ("sfm_dir", "previous_sfm_dir", "goals_json", "capture_log",
+                         "sfm_report", "fulfilment_json"),
     "suite-report": ("evaluations*", "baselines*", "suite_json", "suite_md", "suite_png"),
 }  # fmt: skip
 
@@ -92,7 +105,8 @@ def cmd_sfm(args) -> int:
     prev = inputs.previous_model  # round r-1's map, when it holds one
     if prev is not None and not (prev / "images.bin").exists():
         inputs.previous_model = None
-    print(json.dumps(run(cfg.sfm, inputs, files(args, SfmOutputs)), default=str)[:2000])
+    out = run(cfg.sfm, inputs, files(args, SfmOutputs), person=cfg.person_photos())
+    print(json.dumps(out, default=str)[:2000])
     return 0
 
 
@@ -100,7 +114,7 @@ def cmd_mesh(args) -> int:
     from scenebot.mesh.stage import MeshInputs, MeshOutputs, run
 
     cfg = _config(args)
-    person = cfg.robot == "photos"  # a person's photos: six degrees of freedom
+    person = cfg.person_photos()  # a person's photos: six degrees of freedom
     summary = run(cfg.mesh, files(args, MeshInputs), files(args, MeshOutputs), person=person)
     print(json.dumps(summary, default=str))
     return 0
@@ -110,7 +124,7 @@ def cmd_score(args) -> int:
     from scenebot.score.stage import ScoreInputs, ScoreOutputs, run
 
     cfg = _config(args)
-    person = cfg.robot == "photos"
+    person = cfg.person_photos()
     summary = run(cfg.score, files(args, ScoreInputs), files(args, ScoreOutputs), person=person)
     print(json.dumps(summary, default=str))
     return 0
@@ -120,7 +134,7 @@ def cmd_goals(args) -> int:
     from scenebot.goals.stage import GoalsInputs, GoalsOutputs, run
 
     cfg = _config(args)
-    person = cfg.robot == "photos"
+    person = cfg.person_photos()
     doc = run(cfg.goals, files(args, GoalsInputs), files(args, GoalsOutputs), person=person)
     print(json.dumps(doc))
     return 0
@@ -154,6 +168,25 @@ def cmd_guide_serve(args) -> int:
     return 0
 
 
+def cmd_person_sim(args) -> int:
+    from scenebot.capture.person import run_person_sim_shots
+
+    cfg = _config(args)
+    if cfg.robot != "person-sim":
+        raise ValueError(f"person-sim runs for robot: person-sim, not robot: {cfg.robot}")
+    print(json.dumps(run_person_sim_shots(cfg, Path(args.scene_dir), args.round), default=str))
+    return 0
+
+
+def cmd_guide_fulfilment(args) -> int:
+    from scenebot.guide.fulfil import FulfilInputs, FulfilOutputs, run
+
+    cfg = _config(args)
+    doc = run(cfg.guide, files(args, FulfilInputs), files(args, FulfilOutputs))
+    print(json.dumps(doc["summary"], default=str))
+    return 0
+
+
 def cmd_plan(args) -> int:
     from scenebot.plan.stage import PlanInputs, PlanOutputs, run
 
@@ -177,7 +210,7 @@ def cmd_tour(args) -> int:
     from scenebot.tour.stage import TourInputs, TourOutputs, run
 
     cfg = _config(args)
-    photos = cfg.robot == "photos"  # a person's photos: no free space, no metric scale
+    photos = cfg.person_photos()  # a person's photos: no free space, no metric scale
     inputs = TourInputs(
         Path(args.sparse),
         Path(args.images),
@@ -292,6 +325,23 @@ def build_parser() -> argparse.ArgumentParser:
     with_config(gp)
     add_files(gp, STAGE_FILES["guide-page"])
     gp.set_defaults(func=cmd_guide_page)
+    gf = gsub.add_parser(
+        "fulfilment",
+        help="which shots of the previous round's guide each photo of a round fulfilled "
+        "(round_XXX/fulfilment.json)",
+    )
+    with_config(gf)
+    add_files(gf, STAGE_FILES["guide-fulfilment"])
+    gf.set_defaults(func=cmd_guide_fulfilment)
+    ps = sub.add_parser(
+        "person-sim",
+        help="robot: person-sim: the simulated person takes the shots of round r-1's guide "
+        "into round r's inbox",
+    )
+    with_config(ps)
+    ps.add_argument("--scene-dir", required=True, help="results/<scene>")
+    ps.add_argument("--round", type=int, required=True, help="the round whose inbox it fills")
+    ps.set_defaults(func=cmd_person_sim)
     gs = gsub.add_parser(
         "serve",
         help="serve the current round's guide to a phone and take its photos into the next "

@@ -33,6 +33,7 @@ from scenebot.localize.config import LocalizeConfig
 from scenebot.mesh.config import MeshConfig
 from scenebot.plan.config import PlanConfig
 from scenebot.robot.nxt.config import EmulatorConfig, NxtConfig
+from scenebot.robot.person_config import PersonSimConfig
 from scenebot.score.config import ScoreConfig
 from scenebot.settings import Settings
 from scenebot.sfm.config import SfmConfig
@@ -351,7 +352,7 @@ class AdaptiveConfig(Settings):
 
 
 class PhotosConfig(Settings):
-    """Bring-your-own photos (``robot: photos``)."""
+    """Bring-your-own photos (``robot: photos`` and ``robot: guided``)."""
 
     folder: Path | None = Field(
         None,
@@ -366,8 +367,19 @@ ROBOT_SECTIONS: dict[str, tuple[str, ...]] = {
     "nxt": ("sim", "nxt"),
     "nxt-emulated": ("world", "sim", "nxt", "nxt_emulator"),
     "photos": ("photos",),
+    "guided": ("photos",),
+    "person-sim": ("world", "sim", "person_sim"),
 }
 """The config sections each ``robot:`` backend reads."""
+
+GUIDED_EXHAUSTIVE_MAX_IMAGES = 250
+"""sfm.exhaustive_max_images of a guided campaign unless set: a person's new photos have no
+position to pair them by, so all pairs are matched up to the photo budget."""
+PERSON_ROBOTS = ("photos", "guided", "person-sim")
+"""The backends whose photos are a person's: six degrees of freedom, the person's frame."""
+GUIDED_ROBOTS = ("guided", "person-sim")
+"""The backends of guided rounds: a person takes the next round's photos from the guide page
+and puts them in the round's inbox (``round_XXX/capture/inbox/``)."""
 
 
 class Config(Settings):
@@ -379,12 +391,16 @@ class Config(Settings):
         description="Name of the campaign: results go to results/<scene>/ (one / makes a "
         "subfolder: the suite's campaigns are suite/<name>).",
     )
-    robot: Literal["sim", "nxt", "nxt-emulated", "photos"] = Field(
+    robot: Literal["sim", "nxt", "nxt-emulated", "photos", "guided", "person-sim"] = Field(
         "sim",
         description=(
             "Robot backend: the simulator, a LEGO NXT on a serial port (nxt.port), the NXT "
             "driver against the brick emulator on a pseudo-terminal backed by the simulator, "
-            "or `photos`: no robot, round 0 is the folder of photos in photos.folder."
+            "`photos`: no robot, round 0 is the folder of photos in photos.folder; `guided`: "
+            "round 0 is that folder and every later round the photos a person puts in the "
+            "round's inbox (round_XXX/capture/inbox/) following the previous round's guide "
+            "page; `person-sim`: a simulated person in the simulated world takes them "
+            "(person_sim)."
         ),
     )
     seed: int = Field(1, description="Seed of the robot's noise and exploration choices.")
@@ -404,6 +420,7 @@ class Config(Settings):
     photos: PhotosConfig = PhotosConfig()
     nxt: NxtConfig = NxtConfig()
     nxt_emulator: EmulatorConfig = EmulatorConfig()
+    person_sim: PersonSimConfig = PersonSimConfig()
     sfm: SfmConfig = SfmConfig()
     mesh: MeshConfig = MeshConfig()
     score: ScoreConfig = ScoreConfig()
@@ -422,8 +439,10 @@ class Config(Settings):
     def _photos_folder(self, info: ValidationInfo) -> Config:
         if not _received(info, "photos"):
             return self
-        if self.robot == "photos" and self.photos.folder is None:
-            raise ValueError("robot: photos needs photos.folder (a folder of JPEG or PNG photos)")
+        if self.robot in ("photos", "guided") and self.photos.folder is None:
+            raise ValueError(
+                f"robot: {self.robot} needs photos.folder (a folder of JPEG or PNG photos)"
+            )
         return self
 
     @model_validator(mode="after")
@@ -458,7 +477,7 @@ class Config(Settings):
         # the map's metric scale comes from circles of photos around the rotation axis
         offset = math.hypot(cam.forward_offset_m, cam.lateral_offset_m)
         if (
-            self.robot != "photos"
+            not self.person_photos()
             and offset > 0
             and "camera_offset_m" not in self.sfm.model_fields_set
             and self.sfm.camera_offset_m != offset
@@ -467,10 +486,37 @@ class Config(Settings):
             object.__setattr__(self, "sfm", sfm)
         return self
 
+    @model_validator(mode="after")
+    def _person_pairs(self, info: ValidationInfo) -> Config:
+        """A guided round's photos have no position to choose their match partners by (no
+        odometry, no localization, no compass): unless set, every pair is matched up to
+        ``GUIDED_EXHAUSTIVE_MAX_IMAGES`` photos (the campaign's photo budget)."""
+        if not _received(info, "sfm"):
+            return self
+        sfm = self.sfm
+        if (
+            self.guided_rounds()
+            and "exhaustive_max_images" not in sfm.model_fields_set
+            and sfm.exhaustive_max_images != GUIDED_EXHAUSTIVE_MAX_IMAGES
+        ):
+            update = {"exhaustive_max_images": GUIDED_EXHAUSTIVE_MAX_IMAGES}
+            object.__setattr__(self, "sfm", SfmConfig(**{**sfm.model_dump(), **update}))
+        return self
+
     def robot_sections(self) -> tuple[str, ...]:
         """The config sections the configured robot reads (with ``exploration``, a capture's
         params): changing another robot's settings never re-takes a capture."""
         return ROBOT_SECTIONS[self.robot]
+
+    def person_photos(self) -> bool:
+        """Whether the photos are a person's (``photos``, ``guided``, ``person-sim``): six
+        degrees of freedom, the person's frame, shots instead of a robot's goals."""
+        return self.robot in PERSON_ROBOTS
+
+    def guided_rounds(self) -> bool:
+        """Whether rounds after the first are a person's guided rounds (``guided``,
+        ``person-sim``): photos from the round's inbox, no robot to plan paths for."""
+        return self.robot in GUIDED_ROBOTS
 
     def round_limit(self) -> int:
         """Rounds the campaign runs at most: ``max_rounds``, or 1 for ``robot: photos``

@@ -81,6 +81,34 @@ def look_rotation(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
     return np.stack([right, down, fwd])
 
 
+def similarity_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Similarity ``dst ~ s R src + t`` by least squares (Umeyama 1991).
+
+    Args:
+        src, dst: (N, 3) corresponding points, N >= 3.
+
+    Returns:
+        ``(s, R (3, 3), t (3,))``.
+    """
+    src, dst = np.asarray(src, np.float64), np.asarray(dst, np.float64)
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    a, b = src - mu_s, dst - mu_d
+    U, S, Vt = np.linalg.svd(b.T @ a / len(src))
+    D = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        D[2, 2] = -1
+    R = U @ D @ Vt
+    var = float((a**2).sum() / len(src))
+    s = float(np.trace(np.diag(S) @ D) / var) if var > 0 else 1.0
+    return s, R, mu_d - s * R @ mu_s
+
+
+def view_direction(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
+    """(3,) unit viewing direction of a camera with this heading and tilt (z up)."""
+    cp = np.cos(pitch_rad)
+    return np.array([cp * np.cos(heading_rad), cp * np.sin(heading_rad), np.sin(pitch_rad)])
+
+
 def planar_cam_from_world(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """Rotation and translation of horizontal cameras at height z = 0 (``look_rotation`` with
     no pitch, for many cameras at once).

@@ -422,3 +422,17 @@ def test_diminishing_returns_must_last_patience_rounds(previous_low_rounds, comp
     assert ("2 rounds in a row" in out.get("reason", "")) is complete
     # a round that bought much resets the count
     assert diminishing_returns(30.0, 20.2, p, 0.15, 0.1, None, 0.1, patience=2)["low_rounds"] == 0
+
+
+def test_a_persons_guided_rounds_measure_the_free_volume(tmp_path):
+    """robot: guided, person-sim: the person's free space is a volume (goals.json's
+    free_volume_m3), and diminishing returns measure it as the robot's free area."""
+    p = tmp_path / "goals.json"
+    p.write_text(json.dumps({"mean_score_deg": 40.0, "free_volume_m3": 30.0, "map_images": 40}))
+    out = diminishing_returns(39.0, 30.5, p, 0.15, 0.1, 45, patience=1,
+                              size_key="free_volume_m3")  # fmt: skip
+    assert out["complete"] and "of free_volume_m3" in out["reason"]
+    grew = diminishing_returns(39.0, 36.0, p, 0.15, 0.1, 45, patience=1,
+                               size_key="free_volume_m3")  # fmt: skip
+    assert not grew["complete"] and grew["area_gain"] == pytest.approx(0.2)
+    assert diminishing_returns(39.0, 30.5, p, 0.15, 0.1, 45, patience=1) is None  # no area

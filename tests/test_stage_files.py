@@ -21,8 +21,9 @@ STAGES = {
     "plan": ("scenebot.plan.stage", "PlanInputs", "PlanOutputs"),
     "goals-preview": ("scenebot.goals.preview", "PreviewInputs", "PreviewOutputs"),
     "guide-page": ("scenebot.guide.page", "GuideInputs", "GuideOutputs"),
+    "guide-fulfilment": ("scenebot.guide.fulfil", "FulfilInputs", "FulfilOutputs"),
 }
-RULES = {"goals-preview": "goals_preview", "guide-page": "guide"}
+RULES = {"goals-preview": "goals_preview", "guide-page": "guide", "guide-fulfilment": "fulfilment"}
 """The rule of a command named otherwise."""
 
 

@@ -59,10 +59,11 @@ class CaptureWriteError(RuntimeError):
     """A file of the capture other than a photo or a log record could not be written."""
 
 
-def archive_previous(capture_dir: Path) -> Path | None:
+def archive_previous(capture_dir: Path, keep: tuple[str, ...] = ()) -> Path | None:
     """Move everything an earlier attempt wrote to ``superseded/<time>/`` (never delete).
 
-    Every entry of ``capture_dir`` but ``superseded/`` and the lock moves, by rename, to
+    Every entry of ``capture_dir`` but ``superseded/``, the lock and ``keep`` (a person's
+    ``inbox/``: the photos are the person's, not the attempt's) moves, by rename, to
     the same relative path under ``superseded/<time>/``: photos, ``nav/``, ``inbox/``
     leftovers, logs (``log.jsonl`` stays a hard link of ``session.jsonl``), pictures,
     ``sim_state.json`` and any other file. Image paths in the log are relative to the
@@ -74,7 +75,7 @@ def archive_previous(capture_dir: Path) -> Path | None:
     capture_dir = Path(capture_dir)
     if not capture_dir.is_dir():
         return None
-    entries = sorted(p for p in capture_dir.iterdir() if p.name not in NOT_ARCHIVED)
+    entries = sorted(p for p in capture_dir.iterdir() if p.name not in (*NOT_ARCHIVED, *keep))
     if not any(p.is_file() or (p.is_dir() and _has_file(p)) for p in entries):
         return None
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
@@ -247,10 +248,13 @@ def capture_lock(capture_dir: Path) -> Iterator[dict]:
 # --------------------------------------------------------------------------- start and finish
 
 
-def start_capture(capture_dir: Path, folders: tuple[str, ...] = ("images",)) -> Path | None:
-    """Archive an earlier attempt (:func:`archive_previous`) and create the photo folders.
-    Call it holding the :func:`capture_lock`. Returns the archive folder, if any."""
-    dest = archive_previous(capture_dir)
+def start_capture(
+    capture_dir: Path, folders: tuple[str, ...] = ("images",), keep: tuple[str, ...] = ()
+) -> Path | None:
+    """Archive an earlier attempt (:func:`archive_previous`, leaving ``keep`` in place) and
+    create the photo folders. Call it holding the :func:`capture_lock`. Returns the archive
+    folder, if any."""
+    dest = archive_previous(capture_dir, keep)
     for name in folders:
         (Path(capture_dir) / name).mkdir(exist_ok=True)
     return dest

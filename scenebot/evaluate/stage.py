@@ -12,7 +12,9 @@ Entry points:
   the capture's coverage curve (observable area seen by >= 1 and >= 2 of the first n photos).
 
 The true scene and poses are read only here; nothing a stage decides depends on them. For a
-robot without truth (``nxt``, ``photos``) only the photo and goal counts are written.
+robot without truth (``nxt``, ``photos``, ``guided``) only the photo and goal counts are
+written; a guided campaign adds its shots (``person_shots``: fulfilled, and with the simulated
+person's truth how far from each shot it stood: :mod:`scenebot.evaluate.person`).
 """
 
 from __future__ import annotations
@@ -106,7 +108,7 @@ def _scene(cfg, scene):
 def has_scene_truth(cfg, ecfg: EvaluateConfig | None = None) -> bool:
     """Whether the true scene is known: a simulated robot, or photos taken in the configured
     world (``evaluate.reference_world``)."""
-    if cfg.robot in ("sim", "nxt-emulated"):
+    if cfg.robot in ("sim", "nxt-emulated", "person-sim"):
         return True
     ecfg = _evaluate_cfg(cfg, ecfg)
     return cfg.robot == "photos" and ecfg.reference_world and ecfg.reference_cameras is not None
@@ -238,6 +240,10 @@ def run(
             out["notes"].append(str(exc))
     if cfg.robot == "photos" and cams:
         out["reference"] = _reference_summary(inputs.sfm_dir, caps, sim)
+    if cfg.robot in ("guided", "person-sim") and r:  # the guide's shots, fulfilled and truly
+        from scenebot.evaluate.person import person_shots
+
+        out["person_shots"] = person_shots(Path(inputs.sfm_dir).parents[1], caps, r)
     surf = cloud = None
     if sim is not None and not truth and inputs.dense_cloud is not None:
         if ecfg.reference_bbox is not None:

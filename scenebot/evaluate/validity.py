@@ -130,11 +130,14 @@ def model_similarity(src_dir: Path, dst_dir: Path) -> tuple[float, np.ndarray, n
     return float(s), R, t, len(common)
 
 
-def _candidate_pose(x: float, y: float, theta: float) -> tuple[np.ndarray, np.ndarray]:
-    """cam_from_world (R, t) of a scored candidate: the score stage's horizontal camera."""
-    from scenebot.geometry import planar_cam_from_world
+def _candidate_pose(
+    x: float, y: float, theta: float, z: float = 0.0, pitch: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """cam_from_world (R, t) of a scored candidate: the score stage's horizontal camera at
+    z = 0, or a person's camera (``z``, ``pitch``: six degrees of freedom)."""
+    from scenebot.geometry import tilted_cam_from_world
 
-    Rt = planar_cam_from_world(np.array([x]), np.array([y]), np.array([theta]))[0]
+    Rt = tilted_cam_from_world(np.array([[x, y, z]]), np.array([theta]), np.array([pitch]))[0]
     return Rt[:9].reshape(3, 3), Rt[9:]
 
 
@@ -266,7 +269,8 @@ def _compare_views(
         if len(rows) >= m:
             break
         x, y, th = (float(cands[k][i]) for k in ("x", "y", "theta"))
-        Rc, tc = _candidate_pose(x, y, th)
+        z, pitch = (float(cands[k][i]) if k in cands else 0.0 for k in ("z", "pitch"))
+        Rc, tc = _candidate_pose(x, y, th, z, pitch)
         true, true_depth = truth.render(Rc, tc)
         hit = np.isfinite(true_depth)
         near = float(np.median(true_depth[hit])) if hit.any() else None

@@ -248,7 +248,11 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     The map is complete only when the free space is not degenerate (enough voxels, a camera
     in it: :meth:`~scenebot.artifacts.freespace.FreeVolume.degenerate`), some candidate in it
     could be registered, and the best such view scores below ``goals.complete_threshold_deg``.
-    A folder of photos is one round, so diminishing returns never apply.
+    In a guided campaign (``robot: guided``, ``person-sim``: a previous round's goals.json)
+    the stopping rule is the robot's: diminishing returns of the mean view score and the free
+    volume (``goals.min_score_gain``, ``min_area_gain`` of the volume, ``patience``), and a
+    campaign whose rounds add no photo to the map stops as stuck. A folder of photos is one
+    round, so neither applies there.
     """
     from scenebot.artifacts.freespace import FreeVolume
     from scenebot.goals.select import select_goals_3d
@@ -299,7 +303,14 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
             "coverage": None if coverage is None else coverage[2],
         },
     )  # fmt: skip
-    apply_stopping_rule(doc, None, cfg.complete_threshold_deg)
+    returns = diminishing_returns(
+        doc["mean_score_deg"], vol.volume_m3, inputs.previous_goals_json, cfg.min_score_gain,
+        cfg.min_area_gain, doc["map_images"], patience=cfg.patience, size_key="free_volume_m3",
+    )  # fmt: skip
+    doc["score_gain"] = returns
+    apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
+    _apply_stuck(doc, idle_rounds(doc["map_images"], inputs.previous_goals_json, [],
+                                  cfg.patience))  # fmt: skip
     degenerate = vol.degenerate()
     if degenerate is not None or not valid.any():
         doc["complete"] = False

@@ -34,6 +34,7 @@ def diminishing_returns(
     new_area_m2: float | None = None,
     *,
     patience: int,
+    size_key: str = "free_area_m2",
 ) -> dict | None:
     """What the last round bought, and whether that is too little to go on.
 
@@ -46,7 +47,8 @@ def diminishing_returns(
     this round's free space away from the previous round's; without it, the net growth of
     the free area) is less than ``min_area_gain`` of the previous free area. The net growth
     alone misses a corridor that opens while the map's walls close in elsewhere. None for
-    round 0 (no previous ``goals.json``) or when a measure is missing.
+    round 0 (no previous ``goals.json``) or when a measure is missing. ``size_key``: the
+    goals.json key of the free space's size (a person's map: ``free_volume_m3``).
 
     One round's gain is noisy, so the map is complete only when the gain was that low in
     ``patience`` consecutive rounds (``low_rounds`` counts them; the previous round's count
@@ -59,7 +61,7 @@ def diminishing_returns(
     if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
         return None
     prev_doc = json.loads(previous_goals_json.read_text(encoding="utf-8"))
-    prev, prev_area = prev_doc.get("mean_score_deg"), prev_doc.get("free_area_m2")
+    prev, prev_area = prev_doc.get("mean_score_deg"), prev_doc.get(size_key)
     if not prev or not prev_area:
         return None
     gain = (prev - mean_score) / prev
@@ -95,7 +97,9 @@ def diminishing_returns(
             f"= {100 * min_gain:.0f}%) and the free space by {100 * area_gain:+.1f}% "
             f"({prev_area:.1f} -> {free_area_m2:.1f} m^2"
             + ("" if new_area_m2 is None else f", {new_area_m2:.2f} m^2 of it new")
-            + f"; goals.min_area_gain = {100 * min_area_gain:.0f}%)"
+            + f"; goals.min_area_gain = {100 * min_area_gain:.0f}%"
+            + ("" if size_key == "free_area_m2" else f", of {size_key}")
+            + ")"
             + ("" if patience <= 1 else f", {out['low_rounds']} rounds in a row "
                f"(goals.patience = {patience})")
         )  # fmt: skip

@@ -38,3 +38,16 @@ class GuideConfig(Settings):
         description="guide serve: most photos in one upload (the request is refused above "
         "max_request_photos x max_upload_mb).",
     )
+    fulfil_distance_m: float = Field(
+        0.3,
+        gt=0,
+        description="robot: guided, person-sim: a registered photo fulfils a shot of the "
+        "previous round's guide when its camera centre lies within this of the shot's "
+        "(map units: metres with a metric scale) ...",
+    )
+    fulfil_heading_deg: float = Field(
+        20.0, gt=0, le=180, description="... its heading within this of the shot's (degrees) ..."
+    )
+    fulfil_pitch_deg: float = Field(
+        15.0, gt=0, le=180, description="... and its tilt within this of the shot's (degrees)."
+    )

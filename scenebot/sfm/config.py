@@ -83,7 +83,11 @@ class SfmConfig(Settings):
 
     # --- pairs ----------------------------------------------------------------------------
     exhaustive_max_images: int = Field(
-        40, ge=0, description="Photo sets up to this size are matched exhaustively (all pairs)."
+        40,
+        ge=0,
+        description="Photo sets up to this size are matched exhaustively (all pairs); "
+        "robot: guided and person-sim: 250 unless set (a person's new photos have no "
+        "position to choose their partners by).",
     )
     spatial_neighbors: int = Field(
         20, ge=0, description="Nearest photos by logged position (odometry/localization) per photo."

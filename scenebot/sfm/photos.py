@@ -16,7 +16,7 @@ from pathlib import Path
 
 from PIL import Image, UnidentifiedImageError
 
-from scenebot.capturelog import photo_records
+from scenebot.capturelog import photo_records, read_log
 from scenebot.jpeg import read_exif_focal
 from scenebot.sfm.photofiles import other_files, photo_files
 
@@ -52,6 +52,8 @@ class Photo:
         localization_fix: ``localization`` is a visual fix of this very photo (the log's
             ``localization_source`` is ``this photo``, or absent).
         truth: the simulator's true pose record (evaluation only), or ``None``.
+        source: where a person's photo was taken in from (the log's ``source``: a file of
+            ``photos.folder`` or of the round's inbox), or ``None``.
     """
 
     name: str
@@ -67,6 +69,7 @@ class Photo:
     localization: tuple[float, float, float] | None = None
     localization_fix: bool = False
     truth: dict | None = field(default=None, repr=False)
+    source: str | None = None
 
 
 def inspect_photo(photo: Photo) -> None:
@@ -205,9 +208,33 @@ def photos_from_captures(capture_dirs: list[Path]) -> tuple[Path, list[Photo]]:
                     localization_fix=_pose3(rec.get("localization")) is not None
                     and rec.get("localization_source", "this photo") == "this photo",
                     truth=rec.get("truth"),
+                    source=rec.get("source"),
                 )
             )
     return root, photos
+
+
+def logged_known_distance(capture_dirs: list[Path]) -> tuple[str, str, float] | None:
+    """The first ``known_distance`` event of the capture logs (a person's tape measurement
+    between where it took two photos: ``image_a``, ``image_b``, ``distance_m``) as
+    ``(name_a, name_b, metres)`` with the map's photo names; None without one."""
+    capture_dirs = [Path(d) for d in capture_dirs]
+    if not capture_dirs:
+        return None
+    root = image_root_of(capture_dirs)
+    for cap in capture_dirs:
+        path = cap / "log.jsonl"
+        if not path.is_file():
+            continue
+        rel = cap.resolve().relative_to(root)
+        for rec in read_log(path):
+            if rec.get("type") == "event" and rec.get("event") == "known_distance":
+                return (
+                    (rel / rec["image_a"]).as_posix(),
+                    (rel / rec["image_b"]).as_posix(),
+                    float(rec["distance_m"]),
+                )
+    return None
 
 
 def photos_from_folder(folder: Path) -> tuple[Path, list[Photo]]:

@@ -44,7 +44,13 @@ from scenebot.sfm.mapping import (
 )
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.person_frame import person_frame_transform
-from scenebot.sfm.photos import Photo, check_photos, photos_from_captures, photos_from_folder
+from scenebot.sfm.photos import (
+    Photo,
+    check_photos,
+    logged_known_distance,
+    photos_from_captures,
+    photos_from_folder,
+)
 from scenebot.sfm.place import place_left_out_photos
 from scenebot.sfm.register import camera_xy, global_refinement_checks, map_new_photos
 
@@ -279,8 +285,11 @@ class _Session:
         root, photos, names: the photo folder, the photo set and its names.
         previous: round r-1's model to continue from, or None.
         fix_focal: focal lengths held at their EXIF value.
-        person: the photos are a person's photo folder (``robot: photos``): the person's
-            frame (:mod:`scenebot.sfm.person_frame`) instead of the robot's.
+        person: the photos are a person's (a photo folder, or the capture rounds of
+            ``robot: guided`` and ``person-sim``): the person's frame
+            (:mod:`scenebot.sfm.person_frame`) instead of the robot's.
+        capture_dirs: the capture folders read (their logs may hold a person's tape
+            measurement: :func:`~scenebot.sfm.photos.logged_known_distance`).
         timings: seconds per step (report.json ``timings_s``).
     """
 
@@ -294,6 +303,7 @@ class _Session:
     fix_focal: bool = False
     person: bool = False
     timings: dict[str, float] = field(default_factory=dict)
+    capture_dirs: list[Path] = field(default_factory=list)
 
 
 def _remap_while_circles_disagree(
@@ -385,13 +395,15 @@ def write_model(rec: pycolmap.Reconstruction, model_dir: Path) -> None:
     rec.write_binary(str(model_dir))
 
 
-def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
+def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = False) -> dict:
     """Run structure from motion on all photos of the inputs.
 
     Args:
         cfg: sfm settings.
         inputs: database, capture folders (or a photo folder), previous round's model.
         outputs: where to write.
+        person: the capture folders hold a person's photos (``robot: guided``,
+            ``person-sim``): the person's frame, as for a photo folder.
 
     Returns:
         The report (also written to ``report.json``): counts, dropped photos with reasons,
@@ -408,7 +420,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
         SfmError: fewer than ``cfg.min_registered_share`` of the photos registered (named).
     """
     t_start = time.perf_counter()
-    s = _open_session(cfg, inputs)
+    s = _open_session(cfg, inputs, person)
     features, pairs = _features_and_pairs(s)
     s.fix_focal = _focal_fixed(cfg, s.photos)
     mres = _map(s)
@@ -448,7 +460,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs) -> dict:
     return report
 
 
-def _open_session(cfg: SfmConfig, inputs: SfmInputs) -> _Session:
+def _open_session(cfg: SfmConfig, inputs: SfmInputs, person: bool = False) -> _Session:
     """Read and check the photos and the previous round's model (if usable)."""
     timings: dict[str, float] = {}
     if inputs.photo_folder is not None:
@@ -477,8 +489,9 @@ def _open_session(cfg: SfmConfig, inputs: SfmInputs) -> _Session:
         photos,
         [p.name for p in photos],
         previous=_usable_previous(previous, db_path),
-        person=inputs.photo_folder is not None,
+        person=inputs.photo_folder is not None or person,
         timings=timings,
+        capture_dirs=[Path(d) for d in inputs.capture_dirs],
     )
 
 
@@ -641,12 +654,13 @@ def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, 
     align_kw = _align_settings(s.cfg, s.previous)
     known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
     if s.person:
+        known = _person_known_distance(s, known)
         up = s.cfg.up_photo
         alignment = person_frame_transform(
             mres.reconstruction,
             s.photos,
             known_distance=known,
-            up_photo=(up.image, up.side) if up else None,
+            up_photo=(_person_photo_name(s, up.image), up.side) if up else None,
         )
         s.timings["align"] = time.perf_counter() - t
         return mres, alignment, []
@@ -659,6 +673,27 @@ def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, 
     )
     s.timings["map"] += sum(c.get("seconds", 0.0) for c in scale_checks[1:])
     return mres, alignment, scale_checks
+
+
+def _person_known_distance(
+    s: _Session, known: tuple[str, str, float] | None
+) -> tuple[str, str, float] | None:
+    """A person's scale: ``sfm.known_distance`` (its photo names as the map has them, or as
+    the person named them: a file of ``photos.folder`` taken in as ``round_000/capture/...``),
+    else the tape measurement in the capture logs (``robot: person-sim``)."""
+    if known is None:
+        return logged_known_distance(s.capture_dirs) if s.capture_dirs else None
+    a, b, d = known
+    return _person_photo_name(s, a), _person_photo_name(s, b), d
+
+
+def _person_photo_name(s: _Session, name: str) -> str:
+    """A photo named in a setting as the map names it: a photo folder's file taken into a
+    guided campaign's round 0 (``IMG_0001.jpg``) is ``round_000/capture/images/r000_...``."""
+    if name in s.names:
+        return name
+    by_source = {Path(p.source).name: p.name for p in s.photos if p.source}
+    return by_source.get(name, name)
 
 
 def _log_not_in_map(dropped: dict[str, str]) -> None:

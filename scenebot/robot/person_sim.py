@@ -1,0 +1,353 @@
+"""The simulated person (``robot: person-sim``): a person with a camera in a simulated world.
+
+For tests and evaluation of guided campaigns: round 0 is a walk along the room's walls,
+photos at even spacing facing into the room (:func:`perimeter_walk`); every later round the
+person walks to each shot of the previous round's guide and takes it with a person's error
+(:meth:`SimPerson.shoot`): about ``person_sim.position_std_m`` off where the shot is,
+``heading_std_deg`` off its heading, at a height it can hold the camera (its own eye height,
+drawn once per campaign from ``eye_height_m``, crouched down to ``lowest_m`` or raised by
+``reach_up_m``), tilted as asked plus ``pitch_std_deg``, holding the camera out up to
+``reach_m`` from where it can stand. Shots it cannot reach (outside the room, inside
+furniture) it skips.
+
+The person may use the simulated world's geometry (where it can stand) and where it truly
+stood for its own earlier photos (to read the guide's map: :func:`map_to_world`); nothing
+here is read by a stage to decide anything. Its photos carry the simulator's truth for the
+evaluation, in the records of :mod:`scenebot.capturelog` (``truth``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from scenebot.geometry import Intrinsics, look_rotation, similarity_fit
+from scenebot.jpeg import store_photo, write_jpeg
+from scenebot.robot.person_config import PersonSimConfig
+from scenebot.scene.mesh import SceneMesh
+from scenebot.sim.obstacles import ObstacleMap
+
+BODY_BAND_M = (0.1, 1.5)
+"""Heights (m above the floor) of the geometry that keeps a person from standing there."""
+WALL_BAND = (0.8, 0.9)
+"""Heights, as fractions of the room's height, of the geometry the walk follows: the walls
+(furniture stays below)."""
+STEP_ASIDE_M = 1.5
+"""A spot of the walk inside furniture moves to the nearest spot the person fits, at most
+this far (m); else the photo is not taken."""
+MAP_RES_M = 0.01
+RECOGNISE_M = 0.25
+"""A photo of the map agrees with the person's reading when it lies within this (m) of where
+the person truly took it."""
+RANSAC_TRIES = 300
+"""Minimal sets of three photos tried when reading the map."""
+TANGENT_SPAN_M = 1.0
+"""The walk's direction at a photo is taken over this much of it (m)."""
+"""Cell size (m) of the person's map of where it can stand."""
+
+
+@dataclass
+class ShotPose:
+    """A camera pose in the world: centre (m), heading (rad, counter-clockwise from +x),
+    tilt (rad, up positive) and roll (rad)."""
+
+    center: np.ndarray
+    heading: float
+    pitch: float
+    roll: float = 0.0
+
+    def rotation(self) -> np.ndarray:
+        """(3, 3) cam_from_world rotation (x right, y down, z forward)."""
+        R = look_rotation(self.heading, self.pitch)
+        c, s = math.cos(self.roll), math.sin(self.roll)
+        roll = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return roll @ R
+
+
+@dataclass
+class Shot:
+    """What the person did for one shot: the pose aimed at (world), the pose truly taken
+    (None when skipped) and why it was skipped."""
+
+    aimed: ShotPose
+    taken: ShotPose | None = None
+    skipped: str | None = None
+    extra: dict = field(default_factory=dict)
+
+
+class SimPerson:
+    """A person with a camera in ``scene``.
+
+    Args:
+        scene: the simulated world.
+        cfg: the person's settings.
+        camera: the camera's settings (``sim.camera``: image size, field of view, noise,
+            JPEG quality, sensor width).
+        seed: seed of the person's eye height and errors (the campaign's ``seed`` with the
+            round: every round draws its own errors).
+        eye_seed: seed of the eye height alone (the campaign's: the same person every round).
+    """
+
+    def __init__(self, scene: SceneMesh, cfg: PersonSimConfig, camera, seed, eye_seed: int):
+        from scenebot.sim.renderer import Renderer
+
+        self.scene = scene
+        self.cfg = cfg
+        self.camera = camera
+        self.rng = np.random.default_rng(seed)
+        lo, hi = cfg.eye_height_m
+        self.eye_height_m = float(np.random.default_rng([eye_seed, 7]).uniform(lo, hi))
+        fz = scene.floor_z
+        self.map = ObstacleMap.build(scene, fz + BODY_BAND_M[0], fz + BODY_BAND_M[1], MAP_RES_M)
+        top = float(scene.bounds[1][2]) - fz
+        self.walls = ObstacleMap.build(
+            scene, fz + WALL_BAND[0] * top, fz + WALL_BAND[1] * top, MAP_RES_M
+        )
+        self.intrinsics = Intrinsics.from_hfov(camera.width, camera.height, camera.hfov_deg)
+        self._renderer = None
+        self._renderer_cls = Renderer
+
+    # ------------------------------------------------------------------ where it can stand
+    def can_stand(self, xy) -> bool:
+        """Whether the person fits at world ``xy``: inside the room (the free region the map
+        keeps; outside the walls and inside solids are occupied) and at least
+        ``clearance_m`` from furniture and walls."""
+        xy = np.asarray(xy, float)
+        h, w = self.map.occupied.shape
+        c = np.round((xy - self.map.origin) / self.map.res).astype(int)
+        if not (0 <= c[0] < w and 0 <= c[1] < h):
+            return False
+        return bool(self.map.clearance[c[1], c[0]] >= self.cfg.clearance_m)
+
+    def nearest_standable(self, xy, max_m: float = STEP_ASIDE_M) -> np.ndarray | None:
+        """The spot nearest ``xy`` the person fits at (:meth:`can_stand`), within ``max_m``;
+        None without one."""
+        if self.can_stand(xy):
+            return np.asarray(xy, float)
+        r, c = self.map._cell(xy)
+        k = round(max_m / self.map.res)
+        h, w = self.map.occupied.shape
+        r0, c0 = max(r - k, 0), max(c - k, 0)
+        win = self.map.clearance[r0 : min(r + k + 1, h), c0 : min(c + k + 1, w)]
+        rr, cc = np.nonzero(win >= self.cfg.clearance_m)
+        if len(rr) == 0:
+            return None
+        spots = self.map.origin + np.column_stack([cc + c0, rr + r0]) * self.map.res
+        d = np.linalg.norm(spots - np.asarray(xy, float), axis=1)  # from xy, not its cell
+        j = int(np.argmin(d))
+        return spots[j] if d[j] <= max_m else None
+
+    def camera_height_range(self) -> tuple[float, float]:
+        """Lowest and highest camera height (m, world z) the person can hold the camera at."""
+        fz = self.scene.floor_z
+        return fz + self.cfg.lowest_m, fz + self.eye_height_m + self.cfg.reach_up_m
+
+    # ------------------------------------------------------------------------- shooting
+    def shoot(self, aimed: ShotPose) -> Shot:
+        """Walk to the shot ``aimed`` (world) and take it as a person does: stand where it
+        fits nearest the shot (within ``reach_m``: the camera held out over a desk or a
+        sofa), with the error of the settings around it; skipped, with the reason, when no
+        such spot is near or the shot's spot lies inside or behind furniture from there."""
+        cfg = self.cfg
+        xy = np.asarray(aimed.center[:2], float)
+        stand0 = self.nearest_standable(xy, cfg.reach_m)
+        if stand0 is None:
+            lo, hi = self.scene.bounds
+            where = (
+                "outside the room"
+                if np.any(xy < lo[:2]) or np.any(xy > hi[:2])
+                else "outside the room or in furniture: no spot the person fits (person_sim."
+                f"clearance_m = {cfg.clearance_m} m) within person_sim.reach_m = "
+                f"{cfg.reach_m} m of it"
+            )
+            return Shot(aimed, skipped=f"the spot ({xy[0]:.2f}, {xy[1]:.2f}) m is {where}")
+        arm = xy - stand0  # the camera held out this far from where the person stands
+        for _ in range(20):  # a person does not step into the furniture: stand elsewhere
+            cam_xy = xy + self.rng.normal(0.0, cfg.position_std_m, 2)
+            if self.can_stand(cam_xy - arm):
+                break
+        else:
+            cam_xy = xy
+        stand = cam_xy - arm
+        lo, hi = self.camera_height_range()
+        z = float(np.clip(aimed.center[2], lo, hi) + self.rng.normal(0.0, cfg.height_std_m))
+        z = float(np.clip(z, lo, hi))
+        if self._blocked(np.array([stand[0], stand[1], z]), np.array([cam_xy[0], cam_xy[1], z])):
+            return Shot(
+                aimed,
+                skipped=f"the spot ({xy[0]:.2f}, {xy[1]:.2f}, {z:.2f}) m is inside or behind "
+                f"furniture from where the person can stand ({stand[0]:.2f}, {stand[1]:.2f})",
+            )
+        pitch = aimed.pitch + math.radians(self.rng.normal(0.0, cfg.pitch_std_deg))
+        taken = ShotPose(
+            np.array([cam_xy[0], cam_xy[1], z]),
+            aimed.heading + math.radians(self.rng.normal(0.0, cfg.heading_std_deg)),
+            float(np.clip(pitch, -math.radians(89), math.radians(89))),
+            math.radians(self.rng.normal(0.0, cfg.roll_std_deg)),
+        )
+        return Shot(aimed, taken, extra={"stood_at": [float(stand[0]), float(stand[1])]})
+
+    def _blocked(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether geometry lies between the points ``a`` and ``b`` (the person's arm)."""
+        d = b - a
+        n = float(np.linalg.norm(d))
+        if n < 1e-6:
+            return False
+        hit = self.renderer().cast(a[None], (d / n)[None])
+        return bool(hit["t"][0] < n)
+
+    def renderer(self):
+        """The simulator's renderer of the scene (made on first use)."""
+        if self._renderer is None:
+            cam = self.camera
+            self._renderer = self._renderer_cls(
+                self.scene, noise_sigma=cam.noise_sigma, antialias=cam.antialias
+            )
+        return self._renderer
+
+    def take(self, pose: ShotPose, dest: Path) -> dict:
+        """Render the photo of ``pose`` into ``dest`` (a JPEG with EXIF focal length, stored
+        atomically and never over a file) and return its ``truth`` record (capture log)."""
+        cam = self.camera
+        R = pose.rotation()
+        rgb = self.renderer().render(self.intrinsics, R, pose.center, self.rng)
+        store_photo(
+            Path(dest),
+            lambda tmp: write_jpeg(
+                tmp, rgb, self.intrinsics.fx, cam.sensor_width_mm, cam.jpeg_quality,
+                model="person-sim",
+            ),
+        )  # fmt: skip
+        return truth_record(pose)
+
+
+def truth_record(pose: ShotPose) -> dict:
+    """The capture log's ``truth`` of a person's photo (world frame; ``robot``: where the
+    person stood and its heading, as for the robot)."""
+    return {
+        "robot": {"x": float(pose.center[0]), "y": float(pose.center[1]),
+                  "theta": float(pose.heading)},
+        "center": [float(v) for v in pose.center],
+        "R_cam_from_world": pose.rotation().tolist(),
+        "pitch": float(pose.pitch),
+    }  # fmt: skip
+
+
+# ---------------------------------------------------------------------------- round 0
+
+
+def perimeter_walk(person: SimPerson, n: int, inset_m: float) -> list[ShotPose]:
+    """Round 0 of a person (and the unguided baseline): ``n`` photos at even spacing along
+    the room's walls, ``inset_m`` from them, each facing into the room (square to the walls,
+    their direction taken over ``TANGENT_SPAN_M``) at eye height, level. Where furniture
+    stands on the walk, the person stands at the nearest free spot (within
+    ``STEP_ASIDE_M``; farther, that photo is not taken).
+
+    The walk is the longest closed line at distance ``inset_m`` from the walls (the geometry
+    high up, ``WALL_BAND``: furniture stays below), sampled at ``n`` points evenly spaced by
+    arc length.
+
+    Raises:
+        ValueError: no such line (the room is narrower than twice ``inset_m``).
+    """
+    line = perimeter_line(person.walls, inset_m)
+    closed = np.vstack([line, line[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    length = s[-1]
+    at = np.arange(n) * length / n
+
+    def point(u: np.ndarray) -> np.ndarray:
+        u = np.mod(u, length)
+        return np.column_stack([np.interp(u, s, closed[:, 0]), np.interp(u, s, closed[:, 1])])
+
+    pts = point(at)
+    half = min(TANGENT_SPAN_M, length / 4) / 2
+    tangent = point(at + half) - point(at - half)
+    x, y = closed[:-1, 0], closed[:-1, 1]
+    ccw = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) > 0
+    inward = np.column_stack([-tangent[:, 1], tangent[:, 0]]) * (1.0 if ccw else -1.0)
+    z = person.scene.floor_z + person.eye_height_m
+    out = []
+    for p, d in zip(pts, inward, strict=True):
+        stand = person.nearest_standable(p)
+        if stand is not None:
+            out.append(ShotPose(np.array([stand[0], stand[1], z]), math.atan2(d[1], d[0]), 0.0))
+    return out
+
+
+def perimeter_line(obstacles: ObstacleMap, inset_m: float) -> np.ndarray:
+    """(K, 2) world xy of the longest closed line at clearance ``inset_m`` (m)."""
+    import contourpy
+
+    z = obstacles.clearance
+    gen = contourpy.contour_generator(z=z, line_type=contourpy.LineType.Separate)
+    lines = [ln for ln in gen.lines(inset_m) if len(ln) >= 4]
+    if not lines:
+        raise ValueError(
+            f"no walk at person_sim.perimeter_inset_m = {inset_m} m from the walls: the room "
+            "is narrower; lower it"
+        )
+    best = max(lines, key=lambda ln: float(np.sum(np.linalg.norm(np.diff(ln, axis=0), axis=1))))
+    return obstacles.origin + best * obstacles.res  # (col, row) -> (x, y)
+
+
+def resample_closed(line: np.ndarray, n: int) -> np.ndarray:
+    """(n, 2) points evenly spaced by arc length along the closed polyline ``line`` (K, 2)."""
+    closed = np.vstack([line, line[:1]]) if not np.allclose(line[0], line[-1]) else line
+    seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    at = np.arange(n) * s[-1] / n
+    return np.column_stack([np.interp(at, s, closed[:, 0]), np.interp(at, s, closed[:, 1])])
+
+
+# ------------------------------------------------------------- reading the guide's map
+
+
+def map_to_world(
+    map_centers: np.ndarray,
+    true_centers: np.ndarray,
+    inlier_m: float = RECOGNISE_M,
+    seed: int = 0,
+):
+    """The person's reading of the guide's map: the similarity from the map frame to the
+    world fitted on where its own photos registered and where it truly took them (a person
+    recognises the places of its own photos). A map can hold photos registered metres off
+    (a repeated texture, a folded run of photos); the person is not fooled by a few of them:
+    the fit is the one most photos agree with within ``inlier_m`` (m, world), from minimal
+    sets of three (RANSAC), refitted on those. Returns ``(s, R, t)``
+    (:func:`~scenebot.geometry.similarity_fit`).
+
+    Raises:
+        ValueError: fewer than 3 photos in common.
+    """
+    src, dst = np.asarray(map_centers, float), np.asarray(true_centers, float)
+    if len(src) < 3:
+        raise ValueError(
+            f"the person recognises only {len(src)} of its photos in the map: it "
+            "needs 3 to read the guide's map"
+        )
+    rng = np.random.default_rng(seed)
+    best = np.ones(len(src), bool)
+    best_n = 0
+    for _ in range(RANSAC_TRIES if len(src) > 3 else 1):
+        pick = rng.choice(len(src), 3, replace=False) if len(src) > 3 else np.arange(3)
+        s, R, t = similarity_fit(src[pick], dst[pick])
+        inl = np.linalg.norm(s * src @ R.T + t - dst, axis=1) <= inlier_m
+        if inl.sum() > best_n:
+            best, best_n = inl, int(inl.sum())
+    if best_n < 3:
+        best = np.ones(len(src), bool)
+    return similarity_fit(src[best], dst[best])
+
+
+def shot_in_world(goal: dict, sim) -> ShotPose:
+    """A shot of goals.json (map frame: x, y, z, theta, pitch) as a world pose via the
+    similarity ``sim`` = (s, R, t)."""
+    s, R, t = sim
+    c = s * R @ np.array([goal["x"], goal["y"], goal.get("z", 0.0)], float) + t
+    th, ph = float(goal["theta"]), float(goal.get("pitch", 0.0))
+    d = R @ np.array([math.cos(ph) * math.cos(th), math.cos(ph) * math.sin(th), math.sin(ph)])
+    return ShotPose(c, math.atan2(d[1], d[0]), math.asin(float(np.clip(d[2], -1, 1))))

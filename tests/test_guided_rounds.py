@@ -1,0 +1,264 @@
+"""Guided rounds (``robot: guided``, ``person-sim``): a round's inbox taken in as its capture
+(scenebot/capture/person.py) and the shots each photo fulfilled (scenebot/guide/fulfil.py);
+bad input named: an empty inbox, a photo that is not one, the same photo twice, a photo
+that fulfils no shot, one that does not register."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+
+import numpy as np
+import pycolmap
+import pytest
+from PIL import Image
+
+from scenebot.capture.person import InboxError, run_folder_round, run_inbox_round
+from scenebot.capturelog import photo_records, read_log
+from scenebot.config import Config
+from scenebot.guide.config import GuideConfig
+from scenebot.guide.fulfil import FulfilInputs, FulfilOutputs, compare, fulfils, run
+
+
+def jpeg(path, seed: int) -> bytes:
+    rng = np.random.default_rng(seed)
+    Image.fromarray(rng.integers(0, 255, (24, 32, 3), dtype=np.uint8)).save(path, "JPEG")
+    return path.read_bytes()
+
+
+def sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+@pytest.fixture
+def scene(tmp_path):
+    """results/office with round 0 taken (one photo, its hash logged) and round 1's inbox."""
+    scene = tmp_path / "results" / "office"
+    cap0 = scene / "round_000" / "capture"
+    (cap0 / "images").mkdir(parents=True)
+    old = jpeg(cap0 / "images" / "r000_0000.jpg", 99)
+    (cap0 / "log.jsonl").write_text(
+        json.dumps({"type": "photo", "index": 0, "image": "images/r000_0000.jpg",
+                    "sha256": sha(old)}) + "\n"
+    )  # fmt: skip
+    inbox = scene / "round_001" / "capture" / "inbox"
+    inbox.mkdir(parents=True)
+    return scene, inbox, old
+
+
+def cfg(tmp_path) -> Config:
+    folder = tmp_path / "my photos"
+    folder.mkdir(exist_ok=True)
+    return Config(robot="guided", photos={"folder": str(folder)})
+
+
+def test_an_empty_inbox_says_where_to_put_the_photos(scene, tmp_path):
+    _, inbox, _ = scene
+    (inbox / "notes.txt").write_text("not a photo")
+    with pytest.raises(InboxError) as err:
+        run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    msg = str(err.value)
+    assert f"{inbox}/" in msg
+    assert "round_000/guide/index.html" in msg and "guide serve" in msg
+    assert "max_rounds=1" in msg
+    assert not (inbox.parent / "log.jsonl").exists()
+    assert not (inbox.parent / "images").exists()  # nothing started
+
+
+def test_the_inbox_photos_become_the_rounds_capture_and_stay_in_the_inbox(scene, tmp_path):
+    _, inbox, old = scene
+    data = {n: jpeg(inbox / n, k) for k, n in enumerate(["IMG_2.JPG", "IMG_10.jpg"])}
+    (inbox / "same.jpg").write_bytes(data["IMG_2.JPG"])  # the same photo twice
+    (inbox / "again.jpg").write_bytes(old)  # a photo of round 0 again
+    (inbox / "broken.jpg").write_bytes(b"\xff\xd8 not a jpeg")
+    before = {p.name: p.read_bytes() for p in inbox.iterdir()}
+    summary = run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    assert summary["photos"] == 2
+    cap = inbox.parent
+    recs = photo_records(cap / "log.jsonl")
+    assert [r["image"] for r in recs] == ["images/r001_0000.jpg", "images/r001_0001.jpg"]
+    assert [r["source"] for r in recs] == ["inbox/IMG_2.JPG", "inbox/IMG_10.jpg"]
+    for r in recs:
+        got = (cap / r["image"]).read_bytes()
+        assert got == before[r["source"].rsplit("/", 1)[1]] and sha(got) == r["sha256"]
+        assert not (cap / r["image"]).stat().st_mode & 0o222  # read-only
+    left = {e["source"].rsplit("/", 1)[1]: e["reason"] for e in read_log(cap / "log.jsonl")
+            if e.get("event") == "photo_left_out"}  # fmt: skip
+    assert set(left) == {"same.jpg", "again.jpg", "broken.jpg"}
+    assert "IMG_2.JPG" in left["same.jpg"] and "r000_0000.jpg" in left["again.jpg"]
+    assert "not an image" in left["broken.jpg"]
+    assert (cap / "trajectory.png").is_file()
+    assert {p.name: p.read_bytes() for p in inbox.iterdir()} == before  # never modified
+
+    # a photo added later: the round is taken in again, the earlier attempt archived
+    jpeg(inbox / "IMG_11.jpg", 5)
+    run_inbox_round(cfg(tmp_path), cap, 1)
+    assert len(photo_records(cap / "log.jsonl")) == 3
+    archived = list((cap / "superseded").glob("*/images/r001_0001.jpg"))
+    assert len(archived) == 1 and (inbox / "IMG_11.jpg").is_file()
+    assert not list((cap / "superseded").glob("*/inbox"))  # the inbox stays in place
+
+
+def test_only_bad_photos_is_an_error_naming_each(scene, tmp_path):
+    _, inbox, old = scene
+    (inbox / "again.jpg").write_bytes(old)
+    (inbox / "empty.png").write_bytes(b"")
+    with pytest.raises(InboxError) as err:
+        run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    msg = str(err.value)
+    assert "again.jpg" in msg and "empty.png" in msg and "empty file" in msg
+
+
+def test_the_simulated_persons_truth_goes_into_the_log(scene, tmp_path):
+    _, inbox, _ = scene
+    jpeg(inbox / "person_r001_000.jpg", 1)
+    truth = {"center": [1, 2, 1.5], "R_cam_from_world": np.eye(3).tolist()}
+    (inbox / "person-sim.jsonl").write_text(
+        json.dumps({"type": "shot", "aimed_shot": 2, "image": "person_r001_000.jpg",
+                    "truth": truth}) + "\n"
+        + json.dumps({"type": "shot", "aimed_shot": 3, "skipped": "inside furniture"}) + "\n"
+    )  # fmt: skip
+    run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    (rec,) = photo_records(inbox.parent / "log.jsonl")
+    assert rec["aimed_shot"] == 2 and rec["truth"] == truth
+
+
+def test_round_zero_is_the_folder_taken_in(tmp_path):
+    c = cfg(tmp_path)
+    data = [jpeg(c.photos.folder / f"DSC{k}.jpg", k) for k in range(3)]
+    cap = tmp_path / "results" / "office" / "round_000" / "capture"
+    assert run_folder_round(c, cap)["photos"] == 3
+    recs = photo_records(cap / "log.jsonl")
+    assert [(cap / r["image"]).read_bytes() for r in recs] == data
+    empty = Config(robot="guided", photos={"folder": str(tmp_path / "none")})
+    with pytest.raises(InboxError, match="holds no photo"):
+        run_folder_round(empty, tmp_path / "other" / "round_000" / "capture")
+
+
+# ------------------------------------------------------------------------------ fulfilment
+
+
+def test_a_photo_fulfils_a_shot_within_every_tolerance():
+    cfg = GuideConfig(fulfil_distance_m=0.3, fulfil_heading_deg=20, fulfil_pitch_deg=15)
+    shot = {"rank": 0, "center": np.zeros(3), "heading": 0.0, "pitch": 0.0}
+
+    def axis(h, p):
+        h, p = math.radians(h), math.radians(p)
+        return np.array([math.cos(p) * math.cos(h), math.cos(p) * math.sin(h), math.sin(p)])
+
+    d = compare(np.array([0.2, 0.1, 0.0]), axis(350, 10), shot)
+    assert d["distance"] == pytest.approx(math.hypot(0.2, 0.1))
+    assert d["heading_deg"] == pytest.approx(10) and d["pitch_deg"] == pytest.approx(10)
+    assert fulfils(d, cfg)
+    assert not fulfils(compare(np.array([0.35, 0, 0]), axis(0, 0), shot), cfg)
+    assert not fulfils(compare(np.zeros(3), axis(25, 0), shot), cfg)
+    assert not fulfils(compare(np.zeros(3), axis(0, -20), shot), cfg)
+
+
+def _sim3(scale: float, angle: float, t) -> pycolmap.Sim3d:
+    q = np.array([0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)])  # x, y, z, w
+    return pycolmap.Sim3d(scale, pycolmap.Rotation3d(q), np.asarray(t, float))
+
+
+def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
+    """Round 1's map holds round 0's photos and three new ones in a frame scaled, turned and
+    moved from round 0's: the first new photo stands on shot 0, the second 1 m from any
+    shot, the third did not register."""
+    opts = pycolmap.SyntheticDatasetOptions()
+    opts.num_points3D = 200
+    rec = pycolmap.synthesize_dataset(opts)
+    ids = sorted(rec.reg_image_ids())
+    n0 = len(ids) - 2
+    scene = tmp_path / "results" / "office"
+    names = [f"round_000/capture/images/r000_{k:04d}.jpg" for k in range(n0)]
+    names += [f"round_001/capture/images/r001_{k:04d}.jpg" for k in range(2)]
+    for i, n in zip(ids, names, strict=True):
+        rec.image(i).name = n
+    cur = pycolmap.Reconstruction(rec)
+    cur.transform(_sim3(2.0, 0.8, [1.0, -3.0, 0.5]))  # round 1's frame
+    (scene / "round_001" / "sfm").mkdir(parents=True)
+    cur.write(str(scene / "round_001" / "sfm"))
+    prev = pycolmap.Reconstruction(rec)
+    for i in ids[n0:]:
+        prev.deregister_frame(prev.image(i).frame_id)
+    (scene / "round_000" / "sfm").mkdir(parents=True)
+    prev.write(str(scene / "round_000" / "sfm"))
+
+    def pose(rc, i):  # x, y, z, heading, pitch of a photo in a model
+        im = rc.image(i)
+        v = im.cam_from_world().rotation.matrix()[2]
+        c = im.projection_center()
+        return [*c, math.atan2(v[1], v[0]), math.asin(v[2])]
+
+    x, y, z, th, p = pose(rec, ids[n0])  # round 0's frame: the shot the new photo stands on
+    far = pose(rec, ids[n0 + 1])
+    goals = [
+        {"rank": 0, "x": x + 0.05, "y": y, "z": z, "theta": th + 0.1, "pitch": p},
+        {"rank": 1, "x": far[0] + 1.0, "y": far[1], "z": far[2], "theta": far[3], "pitch": far[4]},
+    ]  # fmt: skip
+    (scene / "round_000" / "goals.json").write_text(json.dumps({"goals": goals}))
+    cap = scene / "round_001" / "capture"
+    cap.mkdir()
+    recs = [{"type": "photo", "index": k, "image": f"images/r001_{k:04d}.jpg",
+             "source": f"{cap}/inbox/IMG_{k}.jpg"} for k in range(3)]  # fmt: skip
+    (cap / "log.jsonl").write_text("".join(json.dumps(r) + "\n" for r in recs))
+    report = scene / "round_001" / "sfm" / "report.json"
+    report.write_text(json.dumps({"dropped": {
+        "round_001/capture/images/r001_0002.jpg": "no verified matches with a registered photo"
+    }}))  # fmt: skip
+    out = scene / "round_001" / "fulfilment.json"
+    # tolerances in map units: round 0's frame is half the size of round 1's
+    g = GuideConfig(fulfil_distance_m=0.3, fulfil_heading_deg=10, fulfil_pitch_deg=10)
+    doc = run(g, FulfilInputs(scene / "round_001" / "sfm", scene / "round_000" / "sfm",
+                              scene / "round_000" / "goals.json", cap / "log.jsonl", report),
+              FulfilOutputs(out))  # fmt: skip
+    assert json.loads(out.read_text()) == json.loads(json.dumps(doc))
+    assert doc["frame"]["scale"] == pytest.approx(2.0)
+    on, off, lost = doc["photos"]
+    assert on["fulfils"] == [0] and on["nearest_shot"]["distance"] == pytest.approx(0.1)
+    assert off["fulfils"] == [] and off["registered"]
+    assert off["nearest_shot"]["rank"] == 1
+    assert off["nearest_shot"]["distance"] == pytest.approx(2.0)  # 1 unit of round 0 x 2
+    assert "IMG_1.jpg (images/r001_0001.jpg) fulfils no shot" in off["message"]
+    assert "shot, #2, is 2.00 away" in off["message"] and "It is kept" in off["message"]
+    assert not lost["registered"]
+    assert "IMG_2.jpg (images/r001_0002.jpg) did not register" in lost["message"]
+    assert "no verified matches" in lost["message"]
+    assert doc["shots"] == [
+        {"rank": 0, "fulfilled_by": ["round_001/capture/images/r001_0000.jpg"]},
+        {"rank": 1, "fulfilled_by": []},
+    ]
+    assert doc["summary"] == {"shots": 2, "fulfilled": 1, "photos": 3, "registered": 2,
+                              "fulfilling_none": 1, "not_registered": 1}  # fmt: skip
+    assert doc["messages"] == [off["message"], lost["message"]]
+
+
+def test_a_guided_campaign_matches_all_pairs_unless_told_otherwise():
+    from scenebot.config import GUIDED_EXHAUSTIVE_MAX_IMAGES
+
+    assert Config(robot="person-sim").sfm.exhaustive_max_images == GUIDED_EXHAUSTIVE_MAX_IMAGES
+    assert Config().sfm.exhaustive_max_images == 40  # the robot pairs by its positions
+    told = Config(robot="person-sim", sfm={"exhaustive_max_images": 60})
+    assert told.sfm.exhaustive_max_images == 60
+
+
+def test_settings_name_a_guided_photo_as_the_person_named_it():
+    """sfm.known_distance and sfm.up_photo name the folder's files (IMG_0003.jpg); a guided
+    campaign's round 0 holds them as round_000/capture/images/r000_NNNN.jpg."""
+    from types import SimpleNamespace
+
+    from scenebot.sfm.photos import Photo
+    from scenebot.sfm.stage import _person_known_distance, _person_photo_name
+
+    photos = [
+        Photo(f"round_000/capture/images/r000_000{k}.jpg", None, source=f"/x/IMG_000{k + 3}.jpg")
+        for k in range(3)
+    ]
+    s = SimpleNamespace(photos=photos, names=[p.name for p in photos], capture_dirs=[])
+    assert _person_photo_name(s, "IMG_0004.jpg") == "round_000/capture/images/r000_0001.jpg"
+    assert _person_photo_name(s, photos[2].name) == photos[2].name
+    assert _person_known_distance(s, ("IMG_0003.jpg", "IMG_0005.jpg", 2.5)) == (
+        photos[0].name, photos[2].name, 2.5,
+    )  # fmt: skip
+    assert _person_known_distance(s, None) is None
