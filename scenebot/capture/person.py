@@ -21,7 +21,6 @@ inbox keeps it. An empty inbox stops the round with a message saying where to pu
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 import json
 import logging
 import math
@@ -42,7 +41,7 @@ from scenebot.capture.session import (
 from scenebot.capturelog import CaptureLog, photo_records, read_log
 from scenebot.config import Config
 from scenebot.jpeg import publish
-from scenebot.sfm.photofiles import photo_files
+from scenebot.sfm.photofiles import photo_files, sha256_of
 
 log = logging.getLogger("scenebot.capture")
 
@@ -57,14 +56,6 @@ class InboxError(RuntimeError):
 
 
 # ----------------------------------------------------------------------------- intake
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def photo_problem(path: Path) -> str | None:
@@ -101,7 +92,7 @@ def earlier_hashes(scene_dir: Path, round_index: int) -> dict[str, str]:
         for rec in photo_records(path):
             digest = rec.get("sha256")
             if digest is None and (cap / rec["image"]).is_file():
-                digest = _sha256(cap / rec["image"])
+                digest = sha256_of(cap / rec["image"])
             if digest:
                 out[digest] = _label(f"round_{k:03d}/capture/{rec['image']}", rec.get("source"))
     return out
@@ -180,7 +171,7 @@ def intake(
     n = 0
     for src in files:
         problem = photo_problem(src)
-        digest = _sha256(src) if problem is None else None
+        digest = sha256_of(src) if problem is None else None
         if problem is None and digest in seen:
             problem = f"the same bytes as {seen[digest]} (the same photo twice)"
         if problem is not None:
@@ -309,7 +300,7 @@ def run_perimeter_round(cfg: Config, capture_dir: Path) -> dict:
                 truth = person.take(pose, capture_dir / image)
                 taken.append((image, pose))
                 clog.write({"type": "photo", "t": float(i), "index": i, "image": image,
-                            "sha256": _sha256(capture_dir / image), "truth": truth})  # fmt: skip
+                            "sha256": sha256_of(capture_dir / image), "truth": truth})  # fmt: skip
             tape = _tape(person, taken, ps)
             if tape is not None:
                 clog.write({"type": "event", "t": float(len(taken)), "event": "known_distance",

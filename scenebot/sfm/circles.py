@@ -25,6 +25,7 @@ import numpy as np
 import pycolmap
 
 from scenebot.sfm.align import turn_in_place_circles
+from scenebot.sfm.mapping import _ba_options, position_priors
 from scenebot.sfm.photos import Photo
 
 log = logging.getLogger(__name__)
@@ -117,24 +118,8 @@ def _prior_bundle_adjustment(
 ) -> None:
     """Global BA (Cauchy loss, 1 px) with position priors ``pred`` (rows of ``ids``); the
     poses of ``constant_ids`` stay fixed."""
-    priors = []
-    cov = np.eye(3) * prior_std_m**2
-    for iid, p in zip(ids, pred, strict=True):
-        if np.all(np.isfinite(p)):
-            prior = pycolmap.PosePrior()
-            prior.corr_data_id = rec.image(iid).data_id
-            prior.position = p
-            prior.position_covariance = cov
-            prior.coordinate_system = pycolmap.PosePriorCoordinateSystem.CARTESIAN
-            priors.append(prior)
-    opts = pycolmap.BundleAdjustmentOptions()
-    opts.print_summary = False
-    opts.refine_focal_length = refine_focal_length
-    opts.refine_principal_point = False
-    opts.refine_extra_params = refine_extra_params
-    opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
-    opts.ceres.loss_function_scale = 1.0
-    opts.ceres.solver_options.num_threads = num_threads
+    priors = position_priors(rec, dict(zip(ids, pred, strict=True)), prior_std_m)
+    opts = _ba_options(num_threads, refine_focal_length, refine_extra_params, cauchy_px=1.0)
     config = pycolmap.BundleAdjustmentConfig()
     for iid in rec.reg_image_ids():
         config.add_image(iid)

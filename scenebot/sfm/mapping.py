@@ -216,9 +216,7 @@ def robust_refinement(
     table = ObservationTable(rec)
     for _ in range(iterations):
         removed += filter_observations(rec, max_error_px, table)
-        opts = _ba_options(num_threads, refine_focal_length, refine_extra_params)
-        opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
-        opts.ceres.loss_function_scale = 1.0
+        opts = _ba_options(num_threads, refine_focal_length, refine_extra_params, cauchy_px=1.0)
         _adjust(rec, opts, constant_names)
     removed += filter_observations(rec, max_error_px, table)
     return {
@@ -247,15 +245,41 @@ def _adjust(
 
 
 def _ba_options(
-    num_threads: int, refine_focal_length: bool, refine_extra_params: bool
+    num_threads: int,
+    refine_focal_length: bool,
+    refine_extra_params: bool,
+    cauchy_px: float | None = None,
 ) -> pycolmap.BundleAdjustmentOptions:
+    """Bundle adjustment options: the principal point held; with ``cauchy_px`` a Cauchy loss
+    of that scale (px) instead of the squared error."""
     opts = pycolmap.BundleAdjustmentOptions()
     opts.print_summary = False
     opts.refine_focal_length = refine_focal_length
     opts.refine_principal_point = False
     opts.refine_extra_params = refine_extra_params
     opts.ceres.solver_options.num_threads = num_threads
+    if cauchy_px is not None:
+        opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+        opts.ceres.loss_function_scale = cauchy_px
     return opts
+
+
+def position_priors(
+    rec: pycolmap.Reconstruction, positions: dict[int, np.ndarray], std_m: float
+) -> list[pycolmap.PosePrior]:
+    """Position priors (isotropic, ``std_m`` m) on the camera centres of images (id ->
+    (3,) position, m); non-finite positions get none."""
+    cov = np.eye(3) * std_m**2
+    priors = []
+    for iid, p in positions.items():
+        if np.all(np.isfinite(p)):
+            prior = pycolmap.PosePrior()
+            prior.corr_data_id = rec.image(iid).data_id
+            prior.position = np.asarray(p, np.float64)
+            prior.position_covariance = cov
+            prior.coordinate_system = pycolmap.PosePriorCoordinateSystem.CARTESIAN
+            priors.append(prior)
+    return priors
 
 
 def _pipeline_options(opts, cfg: SfmConfig, names: list[str]):

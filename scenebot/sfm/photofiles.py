@@ -13,6 +13,7 @@ Standard library only: the Snakefile imports this at every start.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 
@@ -50,3 +51,12 @@ def other_files(folder: Path | str) -> list[Path]:
     if not folder.is_dir():
         return []
     return sorted(p for p in folder.iterdir() if p.is_file() and not is_photo_name(p.name))
+
+
+def sha256_of(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex): the same photo under another name is a repeat."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

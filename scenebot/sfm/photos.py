@@ -9,7 +9,6 @@ order, is defined once in :mod:`scenebot.sfm.photofiles` (the workflow uses it t
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +17,7 @@ from PIL import Image, UnidentifiedImageError
 
 from scenebot.capturelog import photo_records, read_log
 from scenebot.jpeg import read_exif_focal
-from scenebot.sfm.photofiles import other_files, photo_files
+from scenebot.sfm.photofiles import other_files, photo_files, sha256_of
 
 log = logging.getLogger(__name__)
 
@@ -262,7 +261,7 @@ def photos_from_folder(folder: Path) -> tuple[Path, list[Photo]]:
     files: list[Path] = []
     first_of: dict[str, str] = {}
     for p in photo_files(folder):
-        digest = _sha256(p) if p.stat().st_size > 0 else None  # empty files: check_photos
+        digest = sha256_of(p) if p.stat().st_size > 0 else None  # empty files: check_photos
         if digest is not None and digest in first_of:
             log.warning(
                 "%s has the same bytes as %s (the same photo twice): left out of the map",
@@ -275,11 +274,3 @@ def photos_from_folder(folder: Path) -> tuple[Path, list[Photo]]:
         files.append(p)
     photos = [Photo(name=p.name, path=p.resolve(), round=0, index=i) for i, p in enumerate(files)]
     return folder.resolve(), photos
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()

@@ -26,7 +26,12 @@ import pycolmap
 
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.features import open_database
-from scenebot.sfm.mapping import ObservationTable, mapping_options
+from scenebot.sfm.mapping import (
+    ObservationTable,
+    _ba_options,
+    mapping_options,
+    position_priors,
+)
 from scenebot.sfm.photos import Photo
 from scenebot.sfm.register import (
     Tolerance,
@@ -182,29 +187,16 @@ def _adjust_placed(
     if not points:
         return
     table = ObservationTable(rec, images_of(rec, points), points)
-    opts = pycolmap.BundleAdjustmentOptions()
-    opts.print_summary = False
-    opts.refine_focal_length = False
-    opts.refine_principal_point = False
-    opts.refine_extra_params = False
-    opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
-    opts.ceres.loss_function_scale = 1.0
-    opts.ceres.solver_options.num_threads = cfg.num_threads
+    opts = _ba_options(cfg.num_threads, False, False, cauchy_px=1.0)
     prior_opts = pycolmap.PosePriorBundleAdjustmentOptions()
     prior_opts.prior_position_fallback_stddev = cfg.place_prior_std_m
-    cov = np.eye(3) * cfg.place_prior_std_m**2
+    centres = {iid: camera_centre(placed[iid]) for iid in ids}
     for _ in range(max(cfg.refine_iterations, 1)):
         table.delete_beyond(rec, cfg.refine_max_error_px, delete)
         config = pycolmap.BundleAdjustmentConfig()
-        priors = []
         for iid in ids:
             config.add_image(iid)
-            prior = pycolmap.PosePrior()
-            prior.corr_data_id = rec.image(iid).data_id
-            prior.position = camera_centre(placed[iid])
-            prior.position_covariance = cov
-            prior.coordinate_system = pycolmap.PosePriorCoordinateSystem.CARTESIAN
-            priors.append(prior)
+        priors = position_priors(rec, centres, cfg.place_prior_std_m)
         for pid in points:  # the map's own points held; new ones with every observation
             if not rec.exists_point3D(pid):
                 continue

@@ -548,9 +548,9 @@ def refine_new_photos(reg: Registration, cfg: SfmConfig) -> dict:
     ids = [i for i in reg.new_ids if rec.exists_image(i) and rec.image(i).has_pose]
     before = rec.compute_mean_reprojection_error()
     removed = 0
-    opts = _ba_options(cfg.num_threads, refine_focal_length=False, refine_extra_params=False)
-    opts.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
-    opts.ceres.loss_function_scale = 1.0
+    opts = _ba_options(
+        cfg.num_threads, refine_focal_length=False, refine_extra_params=False, cauchy_px=1.0
+    )
     opts.ceres.solver_options.function_tolerance = cfg.register_ba_function_tolerance
     points = points_of(rec, ids)
     table = ObservationTable(rec, images_of(rec, points), points)
