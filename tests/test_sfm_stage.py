@@ -376,17 +376,24 @@ def test_a_registration_far_from_the_robots_estimate_is_estimated_again(
     assert len(new) == 24 and max(new.values()) < 0.02
 
 
-def test_fixes_away_from_the_map_make_the_global_refinement_run(round0, round1, tmp_path):
-    """The robot's fixes 10 cm off the map (beyond what the localization's accuracy
-    explains): the global refinement runs; the new photos stay where the photos put them."""
+def _run_biased_round1(round0, round1, tmp_path, bias, **settings):
+    """Round 1 mapped as :func:`_run_round1` does, in a copy of the round-0 scene, with the
+    robot's fixes of round 1 offset by ``bias`` (m)."""
     base = round0[0]
     scene = tmp_path / "scene"
     shutil.copytree(base / "round_000", scene / "round_000")
     shutil.copytree(base / "sfm_db", scene / "sfm_db")
-    cap1 = round1[1](scene, bias=(0.10, 0.0))
-    report, _, new = _run_round1(
-        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1"
-    )
+    cap1 = round1[1](scene, bias=bias)
+    return _run_round1(
+        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1",
+        **settings,
+    )  # fmt: skip
+
+
+def test_fixes_away_from_the_map_make_the_global_refinement_run(round0, round1, tmp_path):
+    """The robot's fixes 10 cm off the map (beyond what the localization's accuracy
+    explains): the global refinement runs; the new photos stay where the photos put them."""
+    report, _, new = _run_biased_round1(round0, round1, tmp_path, (0.10, 0.0))
     checks = report["global_refinement"]
     assert report["mapping_mode"] == "registered+global" and checks["run"]
     assert "sfm.max_fix_offset_m" in checks["reasons"][0]
@@ -465,13 +472,8 @@ def test_photos_placed_at_a_wrong_estimate_are_taken_out_again(round0, round1, t
     """The robot's estimates of round 1 are 1 m off (a robot that is lost; the stage would
     stop at sfm.min_registered_share, lowered here): its photos, placed there, agree with
     each other but not with the map, and none stays in it."""
-    base = round0[0]
-    scene = tmp_path / "scene"
-    shutil.copytree(base / "round_000", scene / "round_000")
-    shutil.copytree(base / "sfm_db", scene / "sfm_db")
-    cap1 = round1[1](scene, bias=(1.0, 0.0))
-    report, _, new = _run_round1(
-        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1",
+    report, _, new = _run_biased_round1(
+        round0, round1, tmp_path, (1.0, 0.0),
         min_registered_share=0.5, place_left_out_photos=True,
     )  # fmt: skip
     placed = report["placed"]
