@@ -284,6 +284,17 @@ def observable_input(wildcards):
     return [f"{RESULTS}/eval/observable_surface.npz"] if SCENE_TRUTH else []
 
 
+def observable_cache_option(wildcards, output):
+    """`--cache-dir` of rule observable where the config sets evaluate.cache_dir (made
+    absolute; '': no shared cache), else nothing: the stage then follows $SCENEBOT_CACHE or
+    $XDG_CACHE_HOME. A function of the output, so that Snakemake leaves it out of the
+    parameters whose change re-runs a job: where the cache lives changes no result."""
+    if CFG.evaluate.cache_dir is None:
+        return ""
+    folder = CFG.evaluate.cache_folder()
+    return f"--cache-dir {shlex.quote('' if folder is None else str(folder))}"
+
+
 def reference_source(wildcards):
     """The file(s) of evaluate.reference_cameras (a file, or a COLMAP model folder)."""
     path = Path(CFG.evaluate.reference_cameras)

@@ -2,8 +2,11 @@
 # campaign's result. Simulated robots only; the truth is read here and by no decision.
 
 
-# The observable surface of the true scene: computed once per scene (cached in the .npz,
-# keyed by the geometry and the settings), drawn top-down in the .png.
+# The observable surface of the true scene: computed once per scene and settings (the .npz
+# records its key: the geometry and the settings), drawn top-down in the .png. A copy waits
+# in the cache shared by campaigns (evaluate.cache_dir, named by the key's hash) for the next
+# campaign of the scene (the suite's baselines, the tests); the log says whether it came
+# from there. The cache folder is neither input nor output, and no parameter that re-runs.
 rule observable:
     input:
         code=stage_code("observable"),
@@ -24,8 +27,9 @@ rule observable:
     params:
         py=PY,
         cfg=stage_params("world", "sim", "evaluate"),
+        cache=observable_cache_option,
     shell:
-        "{params.py:q} -m scenebot observable --params {params.cfg:q} "
+        "{params.py:q} -m scenebot observable --params {params.cfg:q} {params.cache} "
         "--out {output.npz:q} --png {output.png:q} 2> >(tee {log:q} >&2)"
 
 

@@ -882,9 +882,16 @@ def write_schema(path: Path = SCHEMA_PATH) -> Path:
     return path
 
 
+# Settings that say where files are kept, not what a stage computes: left out of the
+# rules' parameters (section_json), so that changing them re-runs nothing. A rule that needs
+# one passes it on its own (rule observable: evaluate.cache_dir as --cache-dir).
+NOT_PARAMETERS: dict[str, set[str]] = {"evaluate": {"cache_dir"}}
+
+
 def section_json(cfg: Config, *keys: str) -> str:
-    """The named top-level sections of ``cfg`` as canonical JSON (for Snakemake params)."""
-    dump = cfg.model_dump(mode="json")
+    """The named top-level sections of ``cfg`` as canonical JSON (for Snakemake params), less
+    :data:`NOT_PARAMETERS`."""
+    dump = cfg.model_dump(mode="json", exclude=NOT_PARAMETERS)
     return json.dumps({k: dump[k] for k in keys}, sort_keys=True, separators=(",", ":"))
 
 

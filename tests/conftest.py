@@ -14,6 +14,24 @@ from scenebot.scene.mesh import SceneMesh
 from tests.fixtures.rooms import box_room
 
 
+@pytest.fixture(scope="session", autouse=True)
+def shared_cache(tmp_path_factory):
+    """The cache shared by campaigns (``evaluate.cache_dir``) in a folder of this test
+    session that its xdist workers share, never the user's ~/.cache: ``SCENEBOT_CACHE`` for
+    the whole session, inherited by the Snakemake runs, so that the workflow tests compute
+    the office's observable surface once per set of settings."""
+    from tests.fixtures.workflow import _shared_dir
+
+    folder = _shared_dir(tmp_path_factory) / "scenebot-cache"
+    old = os.environ.get("SCENEBOT_CACHE")
+    os.environ["SCENEBOT_CACHE"] = str(folder)
+    yield folder
+    if old is None:
+        os.environ.pop("SCENEBOT_CACHE", None)
+    else:
+        os.environ["SCENEBOT_CACHE"] = old
+
+
 @pytest.fixture(scope="session")
 def room() -> SceneMesh:
     return box_room()

@@ -83,6 +83,19 @@ def test_stage_parameters_keep_the_derived_camera_mount():
     assert from_sections(section_json(cfg, "follow")).follow.camera_forward_m == 0.2
 
 
+def test_where_the_cache_lives_is_no_stage_parameter():
+    """evaluate.cache_dir says where files are kept, not what is computed: out of the rules'
+    parameters (changing it re-runs nothing); the stage gets the default back."""
+    from scenebot.config import from_sections, section_json
+
+    cfg = validate_config({"evaluate": {"cache_dir": "/somewhere", "headings": 4}})
+    text = section_json(cfg, "evaluate")
+    assert "cache_dir" not in json.loads(text)["evaluate"] and "/somewhere" not in text
+    stage = from_sections(text)
+    assert stage.evaluate.headings == 4 and stage.evaluate.cache_dir is None
+    assert text == section_json(validate_config({"evaluate": {"headings": 4}}), "evaluate")
+
+
 # ------------------------------------- values as YAML and --config give them (item 7)
 def _schema_ok(data):
     """The check Snakemake runs after validate_config (rules/common.smk)."""

@@ -83,3 +83,20 @@ def test_baseline_configs_keep_the_campaign_and_change_only_the_method():
         validate_config(cfg, "baseline")  # a valid campaign config
     with pytest.raises(ValueError, match="unknown baseline"):
         baseline_config(campaign, "oracle", 140)
+
+
+def test_a_baseline_shares_the_campaigns_cache(tmp_path, monkeypatch):
+    """The nested campaign runs in its own folder: a relative evaluate.cache_dir is made
+    absolute (the same folder); unset or '' it stays as it is (the environment is
+    inherited)."""
+    from scenebot.evaluate.baselines import _nested_env, baseline_config
+
+    monkeypatch.chdir(tmp_path)
+    for method in ("random", "frontier"):
+        cfg = baseline_config({"evaluate": {"cache_dir": "cache"}}, method, 50)
+        assert cfg["evaluate"]["cache_dir"] == str(tmp_path / "cache")
+        off = baseline_config({"evaluate": {"cache_dir": ""}}, method, 50)
+        assert off["evaluate"]["cache_dir"] == ""
+        assert "cache_dir" not in baseline_config({}, method, 50)["evaluate"]
+    monkeypatch.setenv("SCENEBOT_CACHE", str(tmp_path / "env"))
+    assert _nested_env(tmp_path / "Snakefile")["SCENEBOT_CACHE"] == str(tmp_path / "env")

@@ -92,7 +92,8 @@ def test_a_suite_scene_needs_one_world_and_a_unique_name():
 def test_each_scene_runs_the_workflow_settings_in_its_own_world():
     config = {"scene": "temple", "robot": "photos", "photos": {"folder": "x"},
               "world": {"builtin": "office", "start": {"x": 1, "y": 1}},
-              "goals": {"k": 3}, "evaluate": {"reference_cameras": "cams.txt"}}  # fmt: skip
+              "goals": {"k": 3},
+              "evaluate": {"reference_cameras": "cams.txt", "cache_dir": "cache"}}  # fmt: skip
     suite = SuiteConfig(scenes=[
         {"name": "a", "builtin": "rooms", "seed": 2},
         {"name": "b", "file": "room.glb", "overrides": {"goals": {"k": 4}}},
@@ -105,6 +106,7 @@ def test_each_scene_runs_the_workflow_settings_in_its_own_world():
     assert a["goals"] == {"k": 3} and b["goals"] == {"k": 4}
     assert a["suite"] == {"scenes": [], "baselines": ["random", "frontier"]}  # one campaign
     assert "reference_cameras" not in a["evaluate"]
+    assert a["evaluate"]["cache_dir"] == b["evaluate"]["cache_dir"] == "cache"  # one cache
     assert validate_config(a).scene == "suite/a"
     assert config["robot"] == "photos"  # the workflow's config is left as it was
     assert scene_files(cfgs, "x.json") == ["results/suite/a/x.json", "results/suite/b/x.json"]
@@ -175,7 +177,8 @@ def test_the_suite_is_one_dag_of_every_scene_campaign(workdir):
     baselines rule running suite.baselines, the report waiting for all of them; the sizes a
     profile gives a campaign rule by name (profiles/slurm) reach each scene's copy of it."""
     two = [{"name": "a", "builtin": "office"}, {"name": "a_b", "builtin": "rooms", "seed": 2}]
-    cfg = dict(SMALL, suite={"scenes": two, "baselines": ["frontier"]})
+    cfg = dict(SMALL, suite={"scenes": two, "baselines": ["frontier"]},
+               evaluate={"cache_dir": "cache"})  # fmt: skip
     (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
     sizes = ("--set-resources", "dense:mem_mb=3701", "--set-threads", "dense=1", "--")
     res = snakemake(workdir, "-n", "-p", *sizes, "suite")
@@ -193,6 +196,11 @@ def test_the_suite_is_one_dag_of_every_scene_campaign(workdir):
     assert "rule suite_report:" in out and "results/office" not in out
     cmds = [line for line in out.splitlines() if "-m scenebot baselines " in line]
     assert len(cmds) == 2 and all("--methods frontier " in c for c in cmds), cmds
+    # every scene's observable surface goes through the one shared cache (made absolute)
+    cmds = [line for line in out.splitlines() if "-m scenebot observable " in line]
+    assert len(cmds) == 2, cmds
+    assert all(f"--cache-dir {workdir / 'cache'} " in c for c in cmds), cmds
+    assert all('"cache_dir"' not in c for c in cmds), cmds  # not in --params
 
 
 # The mini-suite: two scenes whose round 0 is the committed canned office photos (45 photos,

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -192,3 +193,42 @@ def test_the_readme_says_what_a_killed_host_leaves_running():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     robots = readme.split("## Robots", 1)[1].split("\n## ", 1)[0]
     assert "SIGKILL" in robots and "tacho limit" in robots
+
+
+@pytest.mark.slow
+def test_two_campaigns_share_the_observable_surface_and_its_folder_reruns_nothing(workdir):
+    """Rule observable in two campaign folders of the same scene and settings: the second
+    copies the first's surface from the shared cache (its log says so, naming the file and the
+    key's hash). Where the cache lives is no parameter: changing it re-runs nothing, while a
+    setting of the surface does."""
+    target = "results/office/eval/observable_surface.npz"
+    fast = {"grid_step_m": 0.6, "headings": 3, "sample_spacing_m": 0.08}
+    cache = workdir / "cache"
+    cfg = dict(SMALL, evaluate=dict(fast, cache_dir=str(cache)))
+    second = workdir / "second"
+    second.mkdir()
+    logs = []
+    for folder in (workdir, second):
+        (folder / "config.yaml").write_text(yaml.safe_dump(cfg))
+        res = snakemake(folder, target)
+        assert res.returncode == 0, why(res, folder)
+        logs.append((folder / "results/office/logs/observable.log").read_text())
+    (shared,) = (cache / "observable").glob("observable_surface-v*.npz")
+    digest = shared.stem.rsplit("-", 1)[1]
+    assert "observable surface computed" in logs[0] and str(shared) in logs[0]
+    assert "from the shared cache" in logs[1] and str(shared) in logs[1] and digest in logs[1]
+    with np.load(workdir / target) as a, np.load(second / target) as b:
+        assert np.array_equal(a["observable"], b["observable"])
+        assert np.array_equal(a["points"], b["points"])
+
+    (second / "config.yaml").write_text(
+        yaml.safe_dump(dict(cfg, evaluate=dict(fast, cache_dir="")))
+    )
+    res = snakemake(second, "-n", target)
+    assert res.returncode == 0 and "Nothing to be done" in res.stdout + res.stderr
+    (second / "config.yaml").write_text(yaml.safe_dump(dict(cfg, evaluate=dict(fast, headings=4))))
+    res = snakemake(second, "-n", "-p", target)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0 and "Params have changed" in out
+    # without evaluate.cache_dir the stage follows SCENEBOT_CACHE (no --cache-dir)
+    assert "-m scenebot observable" in out and "--cache-dir" not in out

@@ -37,6 +37,7 @@ import numpy as np
 import yaml
 
 from scenebot.evaluate.breakdown import COVERAGE_STEP
+from scenebot.evaluate.config import EvaluateConfig
 from scenebot.evaluate.metrics import EvaluationError
 
 LOG = logging.getLogger(__name__)
@@ -56,6 +57,11 @@ def baseline_config(
         rounds: rounds the adaptive campaign ran (the frontier baseline runs as many, so
             both take the same photos when the adaptive one stopped before ``max_rounds``);
             None: the campaign's ``max_rounds``.
+
+    The baseline shares the campaign's cache (``evaluate.cache_dir``, the observable surface
+    of the same scene): a folder the campaign names is made absolute here (the baseline runs
+    in its own folder); unset, the baseline's run inherits the environment
+    (``SCENEBOT_CACHE``, ``XDG_CACHE_HOME``: :func:`_nested_env`).
     """
     cfg = copy.deepcopy(campaign)
     if method == "random":
@@ -68,7 +74,10 @@ def baseline_config(
     else:
         raise ValueError(f"unknown baseline {method!r}; known: {', '.join(METHODS)}")
     # the baselines' own score-validity study would repeat the adaptive one
-    cfg.setdefault("evaluate", {})["validity_candidates"] = 0
+    ev = cfg.setdefault("evaluate", {})
+    ev["validity_candidates"] = 0
+    if ev.get("cache_dir"):  # relative or ~: the same folder from the baseline's own folder
+        ev["cache_dir"] = str(EvaluateConfig(cache_dir=ev["cache_dir"]).cache_folder())
     return cfg
 
 

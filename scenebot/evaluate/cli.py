@@ -52,6 +52,8 @@ def cmd_observable(args) -> int:
     from scenebot.evaluate.stage import ObservableOutputs, run_observable
 
     cfg, ecfg = load_settings(args)
+    if args.cache_dir is not None:  # the workflow's evaluate.cache_dir (not in --params)
+        ecfg.cache_dir = args.cache_dir
     out = Path(args.out)
     png = Path(args.png) if args.png else out.with_suffix(".png")
     print(json.dumps(run_observable(cfg, ObservableOutputs(out, png), ecfg), default=str))
@@ -169,6 +171,11 @@ def add_parsers(sub) -> None:
         sp.add_argument("--params", help="stage parameters as JSON (used by the workflow)")
     o.add_argument("--out", required=True, help="eval/observable_surface.npz")
     o.add_argument("--png", help="its picture (default: beside it, .png)")
+    o.add_argument(
+        "--cache-dir",
+        help="evaluate.cache_dir: the shared cache's folder ('': none; default: the setting, "
+        "else $SCENEBOT_CACHE, else $XDG_CACHE_HOME/scenebot)",
+    )
     o.set_defaults(func=cmd_observable)
     e.add_argument("--scene-dir", required=True, help="results/<scene>")
     e.add_argument("--round", type=int, required=True)

@@ -5,6 +5,7 @@ Kept free of heavy imports: the workflow loads every stage's config at start.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any, Literal
 
@@ -88,6 +89,15 @@ class EvaluateConfig(Settings):
         0, ge=0, description="Evaluate at most this many depth maps, evenly spread (0: all)."
     )
     plots: bool = Field(True, description="Write the PNG pictures.")
+    cache_dir: str | None = Field(
+        None,
+        description="Folder of the cache shared by campaigns of the same scene (the observable "
+        "surface, a file per scene and settings named by their hash): the suite's scenes, "
+        "their baselines and every campaign of a scene compute it once. null: the environment "
+        "variable SCENEBOT_CACHE if set, else $XDG_CACHE_HOME/scenebot (~/.cache/scenebot); "
+        "'' (here or in SCENEBOT_CACHE): no shared cache. Where it lives changes no result: "
+        "it is not among the rules' parameters, so changing it re-runs nothing.",
+    )
 
     # --- bring-your-own photos (robot: photos) ---------------------------------------------
     reference_cameras: Path | None = Field(
@@ -111,6 +121,26 @@ class EvaluateConfig(Settings):
         "in the frame of evaluate.reference_cameras; the evaluation reports the share of the "
         "dense points inside it.",
     )
+
+    def cache_folder(self) -> Path | None:
+        """The shared cache's folder (absolute), or None when the cache is off.
+
+        ``cache_dir`` if set, else ``$SCENEBOT_CACHE`` if set, else ``$XDG_CACHE_HOME/scenebot``
+        (``~/.cache/scenebot`` when XDG_CACHE_HOME is unset, empty or relative, as the XDG
+        base directory specification says); an empty string at either of the first two
+        turns the cache off. ``~`` is expanded; a relative path is taken from the current
+        folder (the workflow's working directory in a rule).
+        """
+        value = self.cache_dir
+        if value is None:
+            value = os.environ.get("SCENEBOT_CACHE")
+        if value is None:
+            xdg = os.environ.get("XDG_CACHE_HOME", "")
+            base = Path(xdg) if os.path.isabs(xdg) else Path("~/.cache").expanduser()
+            return base / "scenebot"
+        if value == "":
+            return None
+        return Path(value).expanduser().absolute()
 
     @field_validator("reference_bbox")
     @classmethod

@@ -23,8 +23,12 @@ Definition (computed by :func:`observable_surface`):
    ``max_incidence_deg`` from the surface normal, and the ray from the camera centre hits
    nothing before it (open3d ray casting; :func:`observable_mask`).
 
-The result is cached in a ``.npz`` file keyed by a hash of the geometry and every setting
-above (:func:`load_or_compute`), and drawn top-down (:func:`plot_observable`).
+The result is written to a ``.npz`` file that records its key: a hash of the geometry and
+every setting above (:func:`cache_key`), and drawn top-down (:func:`plot_observable`).
+:func:`load_or_compute` re-uses that file while its key matches, and keeps a copy in a cache
+shared by campaigns (``evaluate.cache_dir``), one file per key, named by the key's hash
+(:func:`cache_file`): every campaign of a scene with the same settings (the suite's scene,
+its baselines, the tests) reads it instead of computing it again.
 """
 
 from __future__ import annotations
@@ -33,8 +37,15 @@ import hashlib
 import json
 import logging
 import math
+import os
+import shutil
+import uuid
+import zipfile
+import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -121,12 +132,12 @@ class ObservableSurface:
         }
 
     def save(self, path: Path) -> Path:
-        """Write the ``.npz`` cache file (points as float32 to keep it small)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
+        """Write the ``.npz`` file (points as float32 to keep it small), atomically."""
+        return _write_atomic(Path(path), self._dump)
+
+    def _dump(self, fh: BinaryIO) -> None:
         np.savez_compressed(
-            tmp,
+            fh,
             points=self.points.astype(np.float32),
             weights=self.weights.astype(np.float32),
             triangle=self.triangle.astype(np.int32),
@@ -138,8 +149,6 @@ class ObservableSurface:
             reach_width=np.int64(self.reachable["mask"].shape[1]),
             meta=np.array(json.dumps(self.meta, sort_keys=True)),
         )
-        tmp.replace(path)
-        return path
 
     @staticmethod
     def load(path: Path) -> ObservableSurface:
@@ -161,7 +170,7 @@ class ObservableSurface:
                     },
                     meta=json.loads(str(z["meta"])),
                 )
-        except (OSError, KeyError, ValueError) as exc:
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise ObservableError(
                 f"observable-surface file {path} is unreadable ({exc}); delete it to recompute"
             ) from exc
@@ -633,6 +642,121 @@ def observable_surface(
     return surf
 
 
+@dataclass(frozen=True)
+class Provenance:
+    """Where :func:`load_or_compute` got the observable surface.
+
+    Attributes:
+        source: ``"output"`` (the file at its path, whose key matched), ``"cache"`` (the
+            shared cache's file, copied to the path) or ``"computed"``.
+        key_hash: the key's hash (:func:`key_hash`).
+        cache_file: the shared cache's file of the key (:func:`cache_file`); None when the
+            cache is off (``evaluate.cache_dir: ''``).
+    """
+
+    source: str
+    key_hash: str
+    cache_file: Path | None
+
+    @property
+    def cached(self) -> bool:
+        """Read from a file (the output's or the shared cache's), not computed."""
+        return self.source != "computed"
+
+    def as_dict(self) -> dict:
+        """``cached``, ``source``, ``key_hash`` and ``cache_file`` (a string or None)."""
+        return {
+            "cached": self.cached,
+            "source": self.source,
+            "key_hash": self.key_hash,
+            "cache_file": None if self.cache_file is None else str(self.cache_file),
+        }
+
+
+def key_hash(key: dict) -> str:
+    """sha256 (hex) of a :func:`cache_key` as sorted, compact JSON (it holds the
+    ``CACHE_VERSION``)."""
+    text = json.dumps(key, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def cache_file(folder: Path, key: dict) -> Path:
+    """The shared cache's file of ``key`` in the cache folder ``folder``
+    (:meth:`~scenebot.evaluate.config.EvaluateConfig.cache_folder`)."""
+    return Path(folder) / "observable" / f"observable_surface-v{CACHE_VERSION}-{key_hash(key)}.npz"
+
+
+def _write_atomic(path: Path, write: Callable[[BinaryIO], None]) -> Path:
+    """Write ``path`` through ``write`` into a temporary file of its own folder, then rename
+    it (``os.replace``): a reader, or another process writing the same file at once, never
+    sees a half-written file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "xb") as fh:
+            write(fh)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _copy_atomic(src: Path, dst: Path) -> Path:
+    """Copy ``src`` to ``dst`` atomically (:func:`_write_atomic`).
+
+    A copy, not a hard link: Snakemake touches a job's outputs when it ends, and through a
+    hard link that would touch the shared file and every other campaign's output linked to
+    it, whose later rules would then look out of date. The file is a few MB.
+    """
+    with open(src, "rb") as f:
+        return _write_atomic(Path(dst), lambda fh: shutil.copyfileobj(f, fh, 1 << 20))
+
+
+def _matches(surf: ObservableSurface, key: dict) -> bool:
+    return {k: surf.meta.get(k) for k in key} == key
+
+
+def _is_file(path: Path) -> bool:
+    """Whether ``path`` is a file; False when it cannot be checked (a warning)."""
+    try:
+        return path.is_file()
+    except OSError as exc:
+        log.warning("shared cache file %s cannot be checked (%s)", path, exc)
+        return False
+
+
+def _from_cache(shared: Path, key: dict) -> ObservableSurface | None:
+    """The shared cache's surface of ``key``, or None (absent; unreadable or another key:
+    a warning naming the file, and the caller computes it and replaces the file)."""
+    if not _is_file(shared):
+        return None
+    try:
+        surf = ObservableSurface.load(shared)
+    except ObservableError as exc:
+        log.warning("shared cache file %s is unreadable (%s): recomputing and replacing it",
+                    shared, exc.__cause__ or exc)  # fmt: skip
+        return None
+    if not _matches(surf, key):
+        log.warning("shared cache file %s holds another key: recomputing and replacing it", shared)
+        return None
+    return surf
+
+
+def _store(surf: ObservableSurface, path: Path | None, shared: Path) -> bool:
+    """Put the surface in the shared cache (a copy of ``path`` when given); a failure is a
+    warning (the cache only saves time). Returns whether it was stored."""
+    try:
+        if path is not None:
+            _copy_atomic(Path(path), shared)
+        else:
+            _write_atomic(shared, surf._dump)
+    except OSError as exc:
+        log.warning("observable surface not stored in the shared cache %s (%s)", shared, exc)
+        return False
+    return True
+
+
 def load_or_compute(
     path: Path | None,
     scene: SceneMesh,
@@ -640,24 +764,62 @@ def load_or_compute(
     ecfg: EvaluateConfig,
     start: Pose2D | None = None,
     world_cfg=None,
-) -> tuple[ObservableSurface, bool]:
-    """The cached observable surface in ``path`` if its key matches, else compute and save it.
+) -> tuple[ObservableSurface, Provenance]:
+    """The observable surface: the file ``path`` if its key matches, else the shared cache's
+    file of the key (copied to ``path``), else computed, saved to ``path`` and stored in the
+    shared cache (``ecfg.cache_folder()``; None: no shared cache).
+
+    A shared cache file that cannot be read, or holds another key, is a warning naming it; the
+    surface is then computed and the file replaced. Every file is written to a temporary name
+    and renamed, so campaigns computing the same surface at once never leave a half-written
+    file. Logs (INFO) where the surface came from, the cache file and the key's hash.
+
+    Args:
+        path: the campaign's file (``eval/observable_surface.npz``), or None.
+        scene: the true scene.
+        sim_cfg: :class:`~scenebot.config.SimConfig` (robot body and camera mount).
+        ecfg: evaluation settings (with ``cache_dir``).
+        start: start pose; None: as the capture stage picks it.
+        world_cfg: :class:`~scenebot.config.WorldConfig`, for its ``start``.
 
     Returns:
-        (surface, True if it was read from the cache).
+        (surface, where it came from).
     """
     if start is None:
         start = start_pose(scene, world_cfg, collision_map(scene, sim_cfg))
     key = cache_key(scene, sim_cfg, ecfg, start)
+    digest = key_hash(key)
+    folder = ecfg.cache_folder()
+    shared = None if folder is None else cache_file(folder, key)
     if path is not None and Path(path).is_file():
         surf = ObservableSurface.load(path)
-        if {k: surf.meta.get(k) for k in key} == key:
-            return surf, True
+        if _matches(surf, key):
+            # a campaign's file from before the shared cache (or a lost entry) fills it
+            stored = shared is not None and not _is_file(shared) and _store(surf, path, shared)
+            log.info("observable surface: %s matches (key %s)%s", path, digest,
+                     f"; stored in the shared cache: {shared}" if stored else "")  # fmt: skip
+            return surf, Provenance("output", digest, shared)
         log.warning("observable surface %s is stale (scene or settings changed): recomputing", path)
+    surf = None if shared is None else _from_cache(shared, key)
+    if surf is not None:
+        if path is not None:
+            try:
+                _copy_atomic(shared, Path(path))
+            except OSError:  # the cache file went meanwhile (deleted): write what was read
+                surf.save(path)
+        log.info("observable surface from the shared cache (key %s): %s%s", digest, shared,
+                 f", copied to {path}" if path is not None else "")  # fmt: skip
+        return surf, Provenance("cache", digest, shared)
     surf = observable_surface(scene, sim_cfg, ecfg, start)
     if path is not None:
         surf.save(path)
-    return surf, False
+    stored = shared is not None and _store(surf, path, shared)
+    log.info("observable surface computed (key %s)%s; %s", digest,
+             f", saved to {path}" if path is not None else "",
+             f"stored in the shared cache: {shared}" if stored
+             else "the shared cache is off" if shared is None
+             else "not stored in the shared cache")  # fmt: skip
+    return surf, Provenance("computed", digest, shared)
 
 
 def plot_observable(surf: ObservableSurface, png: Path, title: str = "") -> Path:

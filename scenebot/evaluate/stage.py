@@ -125,7 +125,9 @@ def run_observable(cfg, outputs: ObservableOutputs, ecfg: EvaluateConfig | None 
         scene: the true scene; None: loaded from ``cfg.world``.
 
     Returns:
-        The summary (areas, counts, whether the cache was reused, seconds).
+        The summary (areas, counts, seconds) and where the surface came from
+        (:meth:`~scenebot.evaluate.observable.Provenance.as_dict`: ``cached``, ``source``,
+        ``key_hash``, ``cache_file``).
 
     Raises:
         EvaluationError: the campaign's robot has no simulated scene.
@@ -140,10 +142,10 @@ def run_observable(cfg, outputs: ObservableOutputs, ecfg: EvaluateConfig | None 
     ecfg = _evaluate_cfg(cfg, ecfg)
     t0 = time.perf_counter()
     sc = _scene(cfg, scene)
-    surf, cached = load_or_compute(outputs.npz, sc, cfg.sim, ecfg, world_cfg=cfg.world)
+    surf, origin = load_or_compute(outputs.npz, sc, cfg.sim, ecfg, world_cfg=cfg.world)
     if outputs.png is not None and ecfg.plots:
         plot_observable(surf, outputs.png, f"scene {sc.name!r}: observable surface")
-    return {**surf.summary(), "cached": cached, "seconds": time.perf_counter() - t0}
+    return {**surf.summary(), **origin.as_dict(), "seconds": time.perf_counter() - t0}
 
 
 def _reachable_test(cfg, sc):
@@ -260,11 +262,11 @@ def run(
             out["notes"].append("dense cloud not evaluated: no robot->world alignment")
         else:
             sc = _scene(cfg, scene)
-            surf, cached = load_or_compute(
+            surf, origin = load_or_compute(
                 inputs.observable, sc, cfg.sim, ecfg, world_cfg=cfg.world
             )
             obs_file = str(inputs.observable) if inputs.observable else None
-            out["observable"] = {**surf.summary(), "cached": cached, "file": obs_file}
+            out["observable"] = {**surf.summary(), **origin.as_dict(), "file": obs_file}
             cloud = sim.apply(read_cloud(inputs.dense_cloud, ecfg.max_cloud_points, ecfg.seed))
             m, d_comp = weighted_cloud_metrics(
                 cloud, sc.vertices, sc.triangles, surf.observable_points,
