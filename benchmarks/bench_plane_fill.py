@@ -73,7 +73,6 @@ def fill_and_fuse(cfg, dense: Path) -> dict:
 
     from scenebot.dense.planefill import plane_fill
     from scenebot.dense.stage import _plan_views, fuse
-
     from scenebot.dense.workspace import write_configs
 
     rec = pycolmap.Reconstruction(str(dense / "sparse"))
@@ -153,7 +152,8 @@ def main() -> int:
         dense = evaluate(var, scene_dir, round_index)
         by = {m["material"]: m["completeness"]["2cm"] for m in dense["breakdown"]["by_material"]}
         rows.append((name, dense, by, run))
-    print("| variant | views | 2 cm: completeness / accuracy / F | 5 cm | ceiling | walls | planes |")
+    print("| variant | views | 2 cm: completeness / accuracy / F | 5 cm | ceiling | walls "
+          "| planes |")  # fmt: skip
     print("|---|---:|---|---|---:|---:|---:|")
     for name, dense, by, run in rows:
         cells = [
@@ -162,8 +162,9 @@ def main() -> int:
             for d in ("2cm", "5cm")
         ]
         walls = [v for k, v in by.items() if "wall" in k]
-        print(f"| {name} | {run['views']} | {cells[0]} | {cells[1]} | {100 * by.get('ceiling', 0):.1f}% | "
-              f"{100 * float(np.mean(walls or [0])):.1f}% | {run['planes']} |")  # fmt: skip
+        print(f"| {name} | {run['views']} | {cells[0]} | {cells[1]} | "
+              f"{100 * by.get('ceiling', 0):.1f}% | {100 * float(np.mean(walls or [0])):.1f}% | "
+              f"{run['planes']} |")  # fmt: skip
     return 0
 
 
