@@ -3,7 +3,8 @@
 Shading: albedo from mip-mapped, trilinearly filtered textures (texture antialiasing),
 Lambertian lighting from the scene's point lights plus ambient, a Blinn-Phong highlight on
 shiny materials (view-dependent, as a real office's whiteboards and metal are), emissive
-materials unlit, and mild sensor noise. Geometric edges are antialiased by re-casting four
+materials unlit (one taichi kernel per photo, :mod:`scenebot.sim.shading`), and mild sensor
+noise. Geometric edges are antialiased by re-casting four
 sub-pixel rays at pixels whose neighbours differ in depth or surface.
 
 Camera axes follow OpenCV/COLMAP: x right, y down, z forward; a pose is ``R_cam_from_world``
@@ -134,6 +135,7 @@ class Renderer:
         self._shin = np.array([m.shininess for m in scene.materials], np.float64)
         self._emissive = np.array([m.emissive for m in scene.materials], bool)
         self._ray_cache: dict[tuple, np.ndarray] = {}
+        self._shading = None  # the taichi kernel's arrays, made on the first photo
 
     # ----------------------------------------------------------------- ray casting
     def cast(self, origins: np.ndarray, dirs: np.ndarray) -> dict[str, np.ndarray]:
@@ -154,7 +156,22 @@ class Renderer:
         return {"t": t, "prim": prim, "bary": ans["primitive_uvs"].numpy().astype(np.float64)}
 
     def _shade(self, origins, dirs, hit, pixel_angle: float) -> np.ndarray:
-        """Colours (N, 3) float in 0..255 of the hits of rays ``origins + t dirs``."""
+        """Colours (N, 3) float32 in 0..255 of the hits of rays ``origins + t dirs`` (the
+        rays of one camera: ``origins`` all its centre), by the taichi kernel of
+        :mod:`scenebot.sim.shading`."""
+        if self._shading is None:
+            from scenebot.sim.shading import SceneShading
+
+            self._shading = SceneShading(
+                self.scene.material_ids, self.scene.uvs, self._normals, self._texel,
+                self._atlas, self.scene.lights, self._spec, self._shin, self._emissive,
+            )  # fmt: skip
+        origin = np.asarray(origins, float).reshape(-1, 3)[0] if len(dirs) else np.zeros(3)
+        return self._shading.shade(origin, dirs, hit, pixel_angle, self.ambient, self.light_power)
+
+    def shade_reference(self, origins, dirs, hit, pixel_angle: float) -> np.ndarray:
+        """:meth:`_shade` in numpy, float64 (the renderer's own until 2026-11-27): the
+        reference the tests hold the kernel to."""
         n_rays = len(dirs)
         out = np.zeros((n_rays, 3))
         ok = hit["prim"] >= 0
@@ -283,7 +300,7 @@ class Renderer:
         ii, jj = np.nonzero(edge)
         if len(ii) == 0:
             return col
-        acc = np.zeros((len(ii), 3))
+        acc = np.zeros((len(ii), 3), np.float32)
         for ox, oy in ((0.375, 0.125), (0.875, 0.375), (0.625, 0.875), (0.125, 0.625)):
             d = self._pixel_rays(intr, R, (ox, oy), (ii, jj))
             o = np.broadcast_to(c, d.shape)
