@@ -403,6 +403,48 @@ def test_fixes_away_from_the_map_make_the_global_refinement_run(round0, round1, 
     assert len(new) == 24 and max(new.values()) < 0.02
 
 
+def test_photos_that_match_no_map_point_leave_the_fast_path_on_it(round0, round1, tmp_path):
+    """Ten photos of something else (noise, a view the map never saw) join round 1's 24:
+    24 of 34 register (< sfm.min_registered_share), but the ten match fewer map points than
+    any registration needs, so no mapper could place them: the fast path keeps its map
+    instead of running the incremental mapper again (the flat: it added no photo)."""
+    from scenebot.capturelog import read_log
+
+    base = round0[0]
+    scene = tmp_path / "scene"
+    shutil.copytree(base / "round_000", scene / "round_000")
+    shutil.copytree(base / "sfm_db", scene / "sfm_db")
+    cap1 = scene / "round_001" / "capture"
+    shutil.copytree(round1[0], cap1)
+    records = list(read_log(cap1 / "log.jsonl"))
+    photo = next(r for r in records if r.get("type") == "photo")
+    rng = np.random.default_rng(5)
+    extra = []
+    for k in range(10):
+        name = f"images/r001_9{k:03d}.jpg"
+        noise = rng.integers(0, 256, (240 // 8, 320 // 8, 3)).astype(np.uint8)
+        img = np.kron(noise, np.ones((8, 8, 1), np.uint8))  # blocks: many SIFT features
+        write_jpeg_with_exif(cap1 / name, img, photo_focal(cap1 / photo["image"]))
+        extra.append({"type": "photo", "index": 100 + k, "image": name, "t": 500.0 + k})
+    end = [r for r in records if r.get("type") == "end"]
+    body = [r for r in records if r.get("type") != "end"]
+    (cap1 / "log.jsonl").write_text("".join(json.dumps(r) + "\n" for r in body + extra + end))
+    report, _, new = _run_round1(
+        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1"
+    )
+    assert report["mapping_mode"] == "registered", report["mapping_mode"]
+    assert report["refinement"]["registered_now"] == 24
+    assert report["refinement"]["too_few_map_matches"] == 10
+    assert report["registered"] == 60 and len(new) == 24 and max(new.values()) < 0.02
+
+
+def photo_focal(path) -> float:
+    """The focal length (px) a photo's EXIF gives."""
+    from scenebot.jpeg import exif_focal_px
+
+    return exif_focal_px(path)
+
+
 def test_new_photos_the_map_cannot_explain_ask_for_the_global_refinement(
     round0, round1, round1_map
 ):

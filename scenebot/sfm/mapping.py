@@ -44,6 +44,10 @@ class MappingResult:
             :func:`global_sfm_fallback`).
         global_sfm: the global-SfM fallback's decision (report.json ``global_sfm``): why
             it ran, both models' photo counts, which was kept; empty when it did not run.
+        overruled: ``registered`` modes: photos that registered but were taken out again
+            against the robot's estimate (the slow path keeps such photos in its model
+            until the stage leaves them out, so they count as registered toward
+            ``min_registered_share`` on both paths).
     """
 
     reconstruction: pycolmap.Reconstruction
@@ -55,6 +59,7 @@ class MappingResult:
     attempts: int = 0
     new_ids: list[int] = field(default_factory=list)
     mapper: str = "incremental"
+    overruled: int = 0
     global_sfm: dict = field(default_factory=dict)
 
     @property

@@ -66,6 +66,9 @@ class Registration:
         stats: counts and seconds per step (report.json ``refinement``).
         rejected: photo name -> why it was taken out again (its pose against the robot's
             estimate).
+        unreachable: photo name -> how many of the map's points its features match, for
+            the photos left unregistered with fewer than the mapper asks of a registration
+            (``abs_pose_min_num_inliers``).
     """
 
     reconstruction: pycolmap.Reconstruction
@@ -73,6 +76,7 @@ class Registration:
     previous_ids: set[int]
     stats: dict = field(default_factory=dict)
     rejected: dict[str, str] = field(default_factory=dict)
+    unreachable: dict[str, int] = field(default_factory=dict)
 
 
 def map_new_photos(
@@ -105,15 +109,19 @@ def map_new_photos(
     n_new = len(names) - len(reg.previous_ids)
     # a photo taken out against the robot's estimate is judged, not missed: the incremental
     # mapper would only register it where the estimate says it was not (and the stage would
-    # leave it out again, sfm.max_estimate_deviation_m)
-    if len(reg.new_ids) + len(reg.rejected) < cfg.min_registered_share * n_new:
+    # leave it out again, sfm.max_estimate_deviation_m); one whose features match fewer map
+    # points than any registration needs is out of every mapper's reach (the flat's rounds 1
+    # and 3: the mapper, run after the fast path, added no photo to it)
+    judged = len(reg.new_ids) + len(reg.rejected) + len(reg.unreachable)
+    if judged < cfg.min_registered_share * n_new:
         log.warning(
             "%d of %d new photos registered into the previous map, %d taken out against the "
-            "robot's estimate (< sfm.min_registered_share = %g): continuing with the "
-            "incremental mapper",
+            "robot's estimate, %d match too few map points to register (< "
+            "sfm.min_registered_share = %g): continuing with the incremental mapper",
             len(reg.new_ids),
             n_new,
             len(reg.rejected),
+            len(reg.unreachable),
             cfg.min_registered_share,
         )
         return None, reg.reconstruction
@@ -135,6 +143,7 @@ def map_new_photos(
         refinement,
         new_ids=reg.new_ids,
     )
+    result.overruled = len(reg.rejected)
     return result, rec
 
 
@@ -221,6 +230,10 @@ def register_new_photos(
         mopts.abs_pose_min_num_inliers,
     )
     new_ids = _register_loop(mapper, opts, mopts, guess)
+    unreachable = _unreachable(
+        rec, cache.correspondence_graph, names, previous_ids, new_ids, guess.rejected,
+        mopts.abs_pose_min_num_inliers,
+    )  # fmt: skip
     mapper.end_reconstruction(False)
     for iid in new_ids:
         rec.extract_colors_for_image(iid, str(image_root))
@@ -229,9 +242,37 @@ def register_new_photos(
         "poses_from_robot_estimate": guess.taken,
         "poses_from_gated_matches": guess.gated,
         "rejected_against_robot_estimate": len(guess.rejected),
+        "too_few_map_matches": len(unreachable),
         "register_seconds": time.perf_counter() - t0,
     }
-    return Registration(rec, new_ids, previous_ids, stats, dict(guess.rejected_names))
+    return Registration(rec, new_ids, previous_ids, stats, dict(guess.rejected_names), unreachable)
+
+
+def _unreachable(
+    rec: pycolmap.Reconstruction,
+    graph: pycolmap.CorrespondenceGraph,
+    names: list[str],
+    previous_ids: set[int],
+    new_ids: list[int],
+    rejected: set[int],
+    min_inliers: int,
+) -> dict[str, int]:
+    """The photos of ``names`` left unregistered (neither in the map nor taken out against
+    the robot's estimate) whose 2D points match fewer than ``min_inliers`` of the map's 3D
+    points: no pose solver, the incremental mapper's included, can register them against
+    this map (its own bar for a registration); name -> matched map points."""
+    done = previous_ids | set(new_ids) | set(rejected)
+    ids = {im.name: iid for iid, im in rec.images.items()}
+    out = {}
+    for name in names:
+        iid = ids.get(name)
+        if iid in done:
+            continue
+        # a photo the mapper did not even load has no verified pair: no match at all
+        n = 0 if iid is None else len(map_correspondences(rec, graph, iid)[0])
+        if n < min_inliers:
+            out[name] = n
+    return out
 
 
 @dataclass(frozen=True)

@@ -619,9 +619,11 @@ def _refine_globally_if_needed(
 
 def _check_registered(cfg: SfmConfig, mres: MappingResult, n_photos: int) -> None:
     """SfmError naming the dropped photos when fewer than ``cfg.min_registered_share`` of
-    the ``n_photos`` photos (or fewer than 3) registered."""
+    the ``n_photos`` photos (or fewer than 3) registered (the fast path's photos taken out
+    against the robot's estimate count as registered, as on the slow path, whose model
+    holds them until the stage leaves them out: ``mres.overruled``)."""
     n_reg = mres.reconstruction.num_reg_images()
-    if n_reg < cfg.min_registered_share * n_photos or n_reg < 3:
+    if n_reg + mres.overruled < cfg.min_registered_share * n_photos or n_reg < 3:
         listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
         raise SfmError(
             f"only {n_reg} of {n_photos} photos registered (sfm.min_registered_share = "
