@@ -8,7 +8,8 @@ small. Two things still contradict such a map:
 
 1. **Verified pairs the map does not hold** (:func:`pair_track_shares`). Two photos whose
    features matched with a verified two-view geometry (at least :data:`MIN_PAIR_INLIERS`
-   inlier matches, enough to register one photo from the other) see the same surface; in a
+   inlier matches, enough to register one photo from the other, and a baseline that can
+   triangulate them: :data:`MIN_PAIR_ANGLE_DEG`) see the same surface; in a
    right map most of those matches are one 3D point each (the same track), as much as for
    the map's other pairs. Across a fold the map places the two views so that their matches
    do not meet: the share of the pair's inliers that are one track falls to a few percent
@@ -41,6 +42,14 @@ from scenebot.sfm.features import open_database
 MIN_PAIR_INLIERS = 30
 """A verified pair counts for the pair check from this many inlier matches (COLMAP's
 mapper registers a photo from 30 inlier correspondences: ``abs_pose_min_num_inliers``)."""
+MIN_PAIR_ANGLE_DEG = 4.0
+"""A verified pair counts for the pair check only when its baseline subtends at least this
+angle at the median depth of either photo's points: two photos turned in place (a robot's
+circle: 2-5 cm apart at 1.5-3 m, 0.5-2 deg) triangulate their matches with a depth error of
+(1 px / focal) / angle, 10-20 % at 320 x 240, and such a track splits where a third photo
+sees the point, so their share says little (a right circle of the robot's folder: 19-22 %
+against a median of 89 %). Most of the walk's pairs count (neighbours 0.3-0.6 m apart at
+4-5 m: 3.5-9 deg); each of five bent office walks kept 1-9 contradicted pairs."""
 PLANE_OUTLIER_SIGMAS = 4.0
 """A standing photo farther than this many expected standard deviations from the plane of
 the others is off where the person held the camera."""
@@ -97,22 +106,44 @@ class PersonCheck:
 
 
 def pair_track_shares(
-    rec: pycolmap.Reconstruction, db_path, min_inliers: int = MIN_PAIR_INLIERS
+    rec: pycolmap.Reconstruction,
+    db_path,
+    min_inliers: int = MIN_PAIR_INLIERS,
+    min_angle_deg: float = MIN_PAIR_ANGLE_DEG,
 ) -> list[tuple[str, str, int, float]]:
-    """Per verified pair of registered photos with at least ``min_inliers`` inlier matches:
-    the share of those matches whose two features are observations of one 3D point.
+    """Per verified pair of registered photos with at least ``min_inliers`` inlier matches
+    and a baseline that can triangulate them (``min_angle_deg`` at the median depth of the 3D
+    points of either photo, the nearer): the share of those matches whose two features are
+    observations of one 3D point.
 
     Returns:
         ``(name_a, name_b, inliers, share)`` per pair, names in the database's pair order.
     """
     by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
     tracks: dict[int, np.ndarray] = {}
+    depths: dict[int, float] = {}
 
-    def point_ids(image_id: int, missing: int) -> np.ndarray:
+    def median_depth(image_id: int) -> float:
+        if image_id not in depths:
+            im = rec.image(image_id)
+            ids = [p.point3D_id for p in im.points2D if p.has_point3D()]
+            X = np.array([rec.point3D(i).xyz for i in ids]).reshape(-1, 3)
+            z = (im.cam_from_world() * X)[:, 2] if len(X) else np.zeros(0)
+            depths[image_id] = float(np.median(z)) if len(z) else math.inf
+        return depths[image_id]
+
+    def can_triangulate(ia: int, ib: int) -> bool:
+        a, b = rec.image(ia), rec.image(ib)
+        baseline = float(np.linalg.norm(a.projection_center() - b.projection_center()))
+        depth = min(median_depth(ia), median_depth(ib))  # a photo registered off: no points
+        return baseline >= math.tan(math.radians(min_angle_deg)) * depth
+
+    def point_ids(image_id: int) -> np.ndarray:
+        """The 3D point of each feature of the photo (-1: none)."""
         if image_id not in tracks:
             im = rec.image(image_id)
             tracks[image_id] = np.array(
-                [p.point3D_id if p.has_point3D() else missing for p in im.points2D], np.int64
+                [p.point3D_id if p.has_point3D() else -1 for p in im.points2D], np.int64
             )
         return tracks[image_id]
 
@@ -127,9 +158,11 @@ def pair_track_shares(
             na, nb = names.get(a), names.get(b)
             if na not in by_name or nb not in by_name:
                 continue
+            if not can_triangulate(by_name[na], by_name[nb]):
+                continue
             m = db.read_two_view_geometry(a, b).inlier_matches
-            ta, tb = point_ids(by_name[na], -1), point_ids(by_name[nb], -2)
-            same = int(np.sum(ta[m[:, 0]] == tb[m[:, 1]]))
+            pa, pb = point_ids(by_name[na])[m[:, 0]], point_ids(by_name[nb])[m[:, 1]]
+            same = int(np.sum((pa >= 0) & (pa == pb)))
             out.append((na, nb, int(n), same / max(len(m), 1)))
     return out
 
