@@ -127,3 +127,13 @@ def test_a_photo_registered_off_contradicts_its_pairs(synthetic):
     assert len(check.contradicted) == 7  # the photo with each of the 7 others
     assert all(name in pair[:2] for pair in check.contradicted)
     assert "not hold" in check.problems[0] and name.rsplit("/", 1)[-1] in check.problems[0]
+
+
+def test_the_simulated_persons_height_spread_is_the_planes_unless_set():
+    from scenebot.config import Config
+
+    sim = Config(robot="person-sim", person_sim={"height_std_m": 0.03})
+    assert sim.sfm.person_height_std_m == 0.03
+    assert Config(robot="sim").sfm.person_height_std_m == 0.1  # the default: a real person
+    mine = Config(robot="person-sim", sfm={"person_height_std_m": 0.2})
+    assert mine.sfm.person_height_std_m == 0.2

@@ -411,7 +411,8 @@ class SfmConfig(Settings):
         description=(
             "A person's map (robot: photos, guided, person-sim) is checked without the "
             "truth (report.json person_check): a geometrically verified pair of photos (>= 30 "
-            "inlier matches) whose matches the map holds as one 3D point for less than this "
+            "inlier matches, a baseline of >= 4 deg at their depth) whose matches the map "
+            "holds as one 3D point for less than this "
             "share of the median pair's share contradicts the map (a fold, or a photo "
             "registered off: office walks 0-16 % at the folds, >= 30 % on every pair of maps "
             "right within a few cm, median 70-80 %). A map that fails is mapped again "
