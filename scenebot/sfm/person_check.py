@@ -71,6 +71,7 @@ class PersonCheck:
         problems: one message per problem, naming the photos and the setting.
         contradicted: pairs ``(name_a, name_b, inliers, share)`` the map does not hold.
         off_plane: standing photo -> distance (m) from the plane of the others.
+        pairs_per_photo: photo -> verified pairs of it the pair check counted.
         stats: ``pairs`` (counts, median share, threshold) and ``plane`` (normal, tilt
             against the frame's z (deg), robust spread (m), expected, photos); report.json.
     """
@@ -80,6 +81,7 @@ class PersonCheck:
     contradicted: list[tuple[str, str, int, float]] = field(default_factory=list)
     off_plane: dict[str, float] = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    pairs_per_photo: dict[str, int] = field(default_factory=dict)
 
     @property
     def named_photos(self) -> set[str]:
@@ -321,7 +323,11 @@ def check_person_map(
             "no metric scale" if to_frame is None else f"{len(names)} standing photos (< 6)"
         )
     stats = {"pairs": pair_stats, "plane": plane_stats}
-    return PersonCheck(not problems, problems, bad, off, stats)
+    per_photo: dict[str, int] = {}
+    for a, b, *_ in shares:
+        for n in (a, b):
+            per_photo[n] = per_photo.get(n, 0) + 1
+    return PersonCheck(not problems, problems, bad, off, stats, per_photo)
 
 
 def _short(name: str) -> str:
