@@ -276,8 +276,8 @@ def round1(round0, room):
 
 
 def _run_round1(base, cap0, cap1, out0, name, **settings):
-    """Round 1 mapped onto round 0's map; the fast path (sfm.register_new_photos) unless the
-    settings say otherwise (it is off by default until measured beyond the office)."""
+    """Round 1 mapped onto round 0's map; the fast path (sfm.register_new_photos, the
+    default) unless the settings say otherwise."""
     settings = {"register_new_photos": True, **settings}
     cfg = SfmConfig(exhaustive_max_images=10, num_threads=1, **settings)
     out1 = SfmOutputs(base / name)
