@@ -166,7 +166,7 @@ class Renderer:
                 self.scene.material_ids, self.scene.uvs, self._normals, self._texel,
                 self._atlas, self.scene.lights, self._spec, self._shin, self._emissive,
             )  # fmt: skip
-        origin = np.asarray(origins, float).reshape(-1, 3)[0] if len(dirs) else np.zeros(3)
+        origin = np.asarray(origins, float)[0] if len(dirs) else np.zeros(3)  # no copy
         return self._shading.shade(origin, dirs, hit, pixel_angle, self.ambient, self.light_power)
 
     def shade_reference(self, origins, dirs, hit, pixel_angle: float) -> np.ndarray:
