@@ -124,3 +124,31 @@ def test_remove_occluded_keeps_edges_and_drops_see_through():
     out = remove_occluded(z, 7, 0.15)
     assert np.isinf(out[8, 10])
     assert np.isfinite(out[:, 20:]).all() and np.isfinite(out[:, :20][np.arange(20) != 8]).all()
+
+
+def test_one_neighbour_query_sizes_splats_as_a_ball_query_and_a_second_tree():
+    """The outlier test and the splat sizes from one k-nearest query equal the direct way: a
+    ball count for the outliers, then the spacing from a tree of the points kept (a cloud
+    with clustered floaters, some of them next to the surface, so that kept points lose
+    neighbours to the outlier test)."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(3)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 120), np.linspace(0, 1, 120)), -1).reshape(-1, 2)
+    wall = np.concatenate([g + rng.normal(0, 0.001, g.shape), np.zeros((len(g), 1))], 1)
+    blobs = rng.random((40, 3)) * [1, 1, 0.05] + [0, 0, 0.004]  # floaters at the wall
+    blobs = np.repeat(blobs, 6, axis=0) + rng.normal(0, 0.004, (240, 3))
+    pts = np.concatenate([wall, blobs, rng.random((30, 3)) + [0, 0, 0.5]])
+    cfg = ProxyConfig()
+    proxy = build_proxy(pts, None, None, cfg)
+
+    tree = cKDTree(pts)
+    k = cfg.spacing_knn
+    radius = cfg.outlier_radius * float(np.median(tree.query(pts, k=k + 1)[0][:, k]))
+    count = tree.query_ball_point(pts, radius, return_length=True) - 1
+    kept = pts[count >= cfg.outlier_min_neighbors]
+    assert 0 < len(pts) - len(kept) and len(kept) == len(proxy)
+    spacing = cKDTree(kept).query(kept, k=k + 1)[0][:, k]
+    spacing = np.minimum(spacing, 4 * np.median(spacing))
+    np.testing.assert_array_equal(proxy.points, kept.astype(np.float32))
+    np.testing.assert_allclose(proxy.radius, cfg.splat_scale * spacing, rtol=1e-6)

@@ -165,8 +165,8 @@ class SfmConfig(Settings):
         ge=1.01,
         description=(
             "Incremental mapping runs a global bundle adjustment whenever the model grew by "
-            "this factor (COLMAP default 1.1; 1.5 maps about twice as fast, slightly less "
-            "accurately before refinement)."
+            "this factor (COLMAP default 1.1; 1.5 was not faster across scenes: round 0 of "
+            "the office 157 s against 176 s, of the flat 139 s against 111 s)."
         ),
     )
     update_global_ba_ratio: float = Field(
