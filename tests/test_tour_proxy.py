@@ -138,7 +138,7 @@ def test_one_neighbour_query_sizes_splats_as_a_ball_query_and_a_second_tree():
     wall = np.concatenate([g + rng.normal(0, 0.001, g.shape), np.zeros((len(g), 1))], 1)
     blobs = rng.random((40, 3)) * [1, 1, 0.05] + [0, 0, 0.004]  # floaters at the wall
     blobs = np.repeat(blobs, 6, axis=0) + rng.normal(0, 0.004, (240, 3))
-    pts = np.concatenate([wall, blobs, rng.random((30, 3)) + [0, 0, 0.5]])
+    pts = np.concatenate([wall, blobs, rng.random((30, 3)) + np.array([0, 0, 0.5])])
     cfg = ProxyConfig()
     proxy = build_proxy(pts, None, None, cfg)
 
@@ -147,8 +147,33 @@ def test_one_neighbour_query_sizes_splats_as_a_ball_query_and_a_second_tree():
     radius = cfg.outlier_radius * float(np.median(tree.query(pts, k=k + 1)[0][:, k]))
     count = tree.query_ball_point(pts, radius, return_length=True) - 1
     kept = pts[count >= cfg.outlier_min_neighbors]
-    assert 0 < len(pts) - len(kept) and len(kept) == len(proxy)
+    assert len(kept) < len(pts) and len(kept) == len(proxy)
     spacing = cKDTree(kept).query(kept, k=k + 1)[0][:, k]
     spacing = np.minimum(spacing, 4 * np.median(spacing))
     np.testing.assert_array_equal(proxy.points, kept.astype(np.float32))
     np.testing.assert_allclose(proxy.radius, cfg.splat_scale * spacing, rtol=1e-6)
+
+
+def test_a_moved_proxy_is_the_proxy_of_the_moved_cloud():
+    """``transformed`` (the score-validity stage moves the campaign's proxy into a round's
+    frame) gives what building the proxy of the moved cloud gives: the outlier test and the
+    splat sizes are relative to the cloud's own spacing."""
+    rng = np.random.default_rng(5)
+    g = np.stack(np.meshgrid(np.linspace(0, 2, 90), np.linspace(0, 1, 60)), -1).reshape(-1, 2)
+    cloud = np.concatenate([g, rng.normal(0, 0.002, (len(g), 1))], 1)
+    cloud = np.concatenate([cloud, rng.random((25, 3)) + np.array([0, 0, 0.4])])  # floaters
+    nrm = np.tile([0.0, 0.0, 1.0], (len(cloud), 1))
+    col = rng.integers(0, 255, (len(cloud), 3)).astype(np.uint8)
+    c, si = np.cos(0.6), np.sin(0.6)
+    R = np.array([[c, -si, 0], [si, c, 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    )
+    s, t = 1.7, np.array([3.0, -1.0, 2.0])
+    cfg = ProxyConfig()
+    moved = build_proxy(cloud, nrm, col, cfg).transformed(s, R, t)
+    direct = build_proxy(s * cloud @ R.T + t, nrm @ R.T, col, cfg)
+    assert len(moved) == len(direct) == len(g)
+    np.testing.assert_allclose(moved.points, direct.points, atol=1e-5)
+    np.testing.assert_allclose(moved.radius, direct.radius, rtol=1e-4)
+    np.testing.assert_allclose(moved.normals, direct.normals, atol=1e-6)
+    np.testing.assert_array_equal(moved.colors, direct.colors)

@@ -182,19 +182,12 @@ def _synthesis(cfg, inputs: ValidityInputs, rdir: Path) -> _Synthesis:
 
     from scenebot.taichi_setup import init_taichi
     from scenebot.tour.camera import Camera
-    from scenebot.tour.proxy import build_proxy, load_proxy
+    from scenebot.tour.proxy import load_proxy
     from scenebot.tour.ulr import UlrRenderer, load_sources
 
     init_taichi(cfg.tour.taichi_arch, cfg.tour.num_threads)
     s, R, t, n_common = model_similarity(Path(inputs.dense_sfm_dir), rdir / "sfm")
-    dense = load_proxy(inputs.dense_ply, cfg.tour.proxy)
-    proxy = build_proxy(
-        s * dense.points.astype(np.float64) @ R.T + t,
-        dense.normals.astype(np.float64) @ R.T,
-        dense.colors.astype(np.float64) / 255.0,
-        cfg.tour.proxy,
-        source=str(inputs.dense_ply),
-    )
+    proxy = load_proxy(inputs.dense_ply, cfg.tour.proxy).transformed(s, R, t)
     sources = load_sources(pycolmap.Reconstruction(str(rdir / "sfm")), inputs.image_dir)
     ulr = UlrRenderer(proxy, sources, cfg.tour)
     ecfg = cfg.evaluate

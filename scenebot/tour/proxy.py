@@ -41,6 +41,19 @@ class PointProxy:
     def __len__(self) -> int:
         return len(self.points)
 
+    def transformed(self, scale: float, R: np.ndarray, t: np.ndarray) -> "PointProxy":
+        """The proxy moved by the similarity ``x -> scale * R @ x + t`` (another frame of the
+        same scene): positions and splat radii scaled, normals turned; the points and their
+        neighbours are those of this proxy (nothing is filtered or sized again)."""
+        R = np.asarray(R, np.float64)
+        pts = scale * self.points.astype(np.float64) @ R.T + np.asarray(t, np.float64)
+        return PointProxy(
+            points=pts.astype(np.float32),
+            normals=(self.normals.astype(np.float64) @ R.T).astype(np.float32),
+            colors=self.colors,
+            radius=(abs(scale) * self.radius.astype(np.float64)).astype(np.float32),
+        )
+
     def drop_near(self, centers: np.ndarray, radius_m: float) -> "PointProxy":
         """Remove points within ``radius_m`` of any camera centre (metres).
 
