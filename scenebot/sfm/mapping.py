@@ -433,6 +433,19 @@ def _global_options(cfg: SfmConfig, names: list[str], fix_focal: bool):
     return opts
 
 
+def _global_mapping(
+    db_path: Path, image_root: Path, work: Path, cfg: SfmConfig, names: list[str], fix_focal: bool
+) -> dict[int, pycolmap.Reconstruction]:
+    """pycolmap's global SfM of ``names`` into ``work/global`` (replaced); its models."""
+    out = work / "global"
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    return pycolmap.global_mapping(
+        str(db_path), str(image_root), str(out), _global_options(cfg, names, fix_focal)
+    )
+
+
 def global_sfm_fallback(
     db_path: Path,
     image_root: Path,
@@ -472,14 +485,8 @@ def global_sfm_fallback(
     if not left:
         return models, "incremental", {}
     t = time.perf_counter()
-    out = work / "global"
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
     try:
-        glob = pycolmap.global_mapping(
-            str(db_path), str(image_root), str(out), _global_options(cfg, names, fix_focal)
-        )
+        glob = _global_mapping(db_path, image_root, work, cfg, names, fix_focal)
     except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
         log.warning("global SfM failed (%s): keeping the incremental model", exc)
         glob = {}
@@ -671,14 +678,8 @@ def map_globally(
         SfmError: no model (the message names the photos without verified matches).
     """
     t0 = time.perf_counter()
-    out = work / "global"
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
     try:
-        models = pycolmap.global_mapping(
-            str(db_path), str(image_root), str(out), _global_options(cfg, names, fix_focal)
-        )
+        models = _global_mapping(db_path, image_root, work, cfg, names, fix_focal)
     except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
         raise SfmError(f"global SfM failed: {exc}") from exc
     if not models:
