@@ -11,11 +11,14 @@ import pytest
 
 from scenebot.sfm.mapping import filter_observations
 from scenebot.sfm.person_check import (
+    MIN_MEDIAN_PAIR_SHARE,
+    PairGeometry,
     check_person_map,
     contradicted_pairs,
     fit_plane,
     height_plane,
     pair_track_shares,
+    turned_in_place,
 )
 
 
@@ -137,3 +140,45 @@ def test_the_simulated_persons_height_spread_is_the_planes_unless_set():
     assert Config(robot="sim").sfm.person_height_std_m == 0.1  # the default: a real person
     mine = Config(robot="person-sim", sfm={"person_height_std_m": 0.2})
     assert mine.sfm.person_height_std_m == 0.2
+
+
+def test_a_map_holding_few_of_its_median_pairs_matches_fails_as_a_whole(synthetic):
+    rec, db_path = synthetic
+    for pid in list(rec.point3D_ids()):  # global SfM of turn-in-place circles: no tracks
+        rec.delete_point3D(pid)
+    check = check_person_map(
+        rec, db_path, standing=[], to_frame=None, min_pair_share=0.25, height_std_m=0.05
+    )
+    assert not check.ok and check.whole  # before: the bar, 0.25 x a median of 0, passed it
+    assert check.contradicted == [] and check.named_photos == set()  # no photo to blame
+    assert f"below {MIN_MEDIAN_PAIR_SHARE:.0%}" in check.problems[0]
+    off = check_person_map(
+        rec, db_path, standing=[], to_frame=None, min_pair_share=0.0, height_std_m=0.05
+    )
+    assert off.ok  # the pair check turned off
+
+
+def test_pairs_turned_in_place_are_not_checked_but_counted():
+    def pair(parallax, turn):
+        return PairGeometry("a", "b", 50, parallax, turn, 0.1)
+
+    assert pair(0.5, 20.0).turned_in_place  # a circle's neighbours: 1 deg, turned 20
+    assert not pair(3.0, 40.0).turned_in_place  # a walk's corner
+    assert not pair(0.5, 2.0).turned_in_place  # the same view twice
+    pairs = [pair(0.5, 20.0), PairGeometry("c", "d", 50, 6.0, 20.0, 0.8)]
+    assert pair_track_shares(None, None, pairs=pairs) == [("c", "d", 50, 0.8)]
+    assert turned_in_place(pairs) == {"a", "b"}
+
+
+def test_a_map_failing_as_a_whole_ranks_below_one_with_photos_to_leave_out():
+    from types import SimpleNamespace
+
+    from scenebot.sfm.person_check import PersonCheck
+    from scenebot.sfm.stage import _unplaced
+
+    s = SimpleNamespace(photos=[None] * 45)
+    mres = SimpleNamespace(reconstruction=SimpleNamespace(num_reg_images=lambda: 45))
+    folded = PersonCheck(False, ["median 0 %"], whole=True)
+    named = PersonCheck(False, ["12 pairs"], [(f"p{i}", f"q{i}", 40, 0.0) for i in range(12)])
+    assert _unplaced(s, mres, named) < _unplaced(s, mres, folded)
+    assert _unplaced(s, mres, PersonCheck(True)) < _unplaced(s, mres, named)

@@ -414,12 +414,14 @@ class SfmConfig(Settings):
         description=(
             "A person's map (robot: photos, guided, person-sim) is checked without the "
             "truth (report.json person_check): a geometrically verified pair of photos (>= 30 "
-            "inlier matches, a baseline of >= 4 deg at their depth) whose matches the map "
+            "inlier matches whose rays the map makes meet at >= 4 deg) whose matches the map "
             "holds as one 3D point for less than this "
             "share of the median pair's share contradicts the map (a fold, or a photo "
             "registered off: office walks 0-16 % at the folds, >= 30 % on every pair of maps "
-            "right within a few cm, median 70-80 %). A map that fails is mapped again "
-            "(global SfM, then sfm.person_remap_attempts seeds); 0 turns the check off."
+            "right within a few cm, median 70-80 %); a median pair below 30 % fails the map "
+            "as a whole. A map that fails is mapped again (global SfM unless a quarter of "
+            "the photos turned in place, then sfm.person_remap_attempts seeds); 0 turns the "
+            "check off."
         ),
     )
     person_height_std_m: float = Field(

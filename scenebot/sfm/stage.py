@@ -44,7 +44,7 @@ from scenebot.sfm.mapping import (
     refine_globally,
 )
 from scenebot.sfm.pairs import PairPrior, select_pairs
-from scenebot.sfm.person_check import PersonCheck, check_person_map
+from scenebot.sfm.person_check import TURNED_SHARE_NO_GLOBAL, PersonCheck, check_person_map
 from scenebot.sfm.person_frame import person_frame_transform
 from scenebot.sfm.photos import (
     Photo,
@@ -714,25 +714,39 @@ def _person_check(s: _Session, mres: MappingResult, alignment: Alignment) -> Per
     )
 
 
-def _unplaced(s: _Session, mres: MappingResult, check: PersonCheck) -> tuple[bool, int, int]:
+def _unplaced(s: _Session, mres: MappingResult, check: PersonCheck) -> tuple[bool, bool, int, int]:
     """How wrong a map of the person's photos is, for choosing among maps of the same
-    photos: failing its check, then photos not registered or named by the check, then
+    photos: failing its check, failing it as a whole (``check.whole``: no photo to leave
+    out makes it right), then photos not registered or named by the check, then
     contradicted pairs (smaller is better)."""
     missing = len(s.photos) - mres.reconstruction.num_reg_images()
-    return not check.ok, missing + len(check.named_photos), len(check.contradicted)
+    named = missing + len(check.named_photos)
+    return not check.ok, check.whole, named, len(check.contradicted)
 
 
-def _person_remaps(s: _Session):
-    """The other ways to map a person's photos, in order: global SfM, then incremental
-    mapping from scratch with ``cfg.person_remap_attempts`` other seeds. Yields ``(how,
-    map)`` with ``map()`` the mapping result."""
+def _person_remaps(s: _Session, check: PersonCheck, registered: int):
+    """The other ways to map a person's photos, in order: global SfM (not when at least
+    :data:`TURNED_SHARE_NO_GLOBAL` of the ``registered`` photos turned in place, as ``check``
+    of the first map finds them: ``map()`` is then None), then incremental mapping from
+    scratch with ``cfg.person_remap_attempts`` other seeds. Yields ``(how, map)`` with
+    ``map()`` the mapping result."""
     cfg = s.cfg
-    yield (
-        "global SfM",
-        lambda: map_globally(
-            s.db_path, s.root, s.names, s.work / "person_global", cfg, s.fix_focal
-        ),
-    )
+    turned = check.stats["pairs"].get("turned_in_place_photos", 0)
+    if turned >= TURNED_SHARE_NO_GLOBAL * registered:
+        log.warning(
+            "not mapping the person's photos with global SfM: %d of %d photos turned in "
+            "place, which global positioning cannot place",
+            turned,
+            registered,
+        )
+        yield "global SfM", lambda: None
+    else:
+        yield (
+            "global SfM",
+            lambda: map_globally(
+                s.db_path, s.root, s.names, s.work / "person_global", cfg, s.fix_focal
+            ),
+        )
     for k in range(cfg.person_remap_attempts):
         seed = cfg.random_seed + cfg.mapping_attempts + k
         run_cfg = cfg.model_copy(update={"random_seed": seed, "mapping_attempts": 1})
@@ -769,10 +783,14 @@ def _check_person_map(
     best, kept = (mres, alignment, check), 0
     if not check.ok:
         log.warning("the person's map fails its check: %s", "; ".join(check.problems))
-        for how, remap in _person_remaps(s):
+        registered = mres.reconstruction.num_reg_images()
+        for how, remap in _person_remaps(s, check, registered):
             log.warning("mapping the person's photos again: %s", how)
             try:
                 m2 = remap()
+                if m2 is None:
+                    runs.append({"mapping": how, "skipped": "photos turned in place"})
+                    continue
                 a2 = _person_alignment(s, m2)
             except (SfmError, ValueError) as exc:
                 log.warning("%s failed: %s", how, exc)
@@ -812,6 +830,8 @@ def _check_record(how: str, mres: MappingResult, check: PersonCheck) -> dict:
         "mapper": mres.mapper,
         "registered": mres.reconstruction.num_reg_images(),
         "ok": check.ok,
+        "whole": check.whole,
+        "median_pair_share": check.stats["pairs"].get("median_share"),
         "contradicted_pairs": len(check.contradicted),
         "off_plane": len(check.off_plane),
         "problems": check.problems,
@@ -881,10 +901,12 @@ def _leave_out_named(
         log.warning(
             "left out of the person's map: %s", "; ".join(f"{n} ({w})" for n, w in out.items())
         )
+        spread = _camera_spread(rec)
         refine_globally(
             mres, s.db_path, s.root, s.work / f"person_left_out_{step}", s.cfg, s.names,
             s.fix_focal, _kept_previous(s, mres.continued),
         )  # fmt: skip
+        _hold_camera_spread(mres.reconstruction, spread)
         step += 1
         try:
             alignment = _person_alignment(s, mres)
@@ -895,11 +917,30 @@ def _leave_out_named(
     return alignment, check
 
 
+def _camera_spread(rec: pycolmap.Reconstruction) -> float:
+    """The median distance of the registered camera centres from their centroid (model
+    units)."""
+    C = np.array([rec.image(i).projection_center() for i in rec.reg_image_ids()])
+    return float(np.median(np.linalg.norm(C - C.mean(0), axis=1)))
+
+
+def _hold_camera_spread(rec: pycolmap.Reconstruction, spread: float) -> None:
+    """Scale ``rec`` about its origin back to the camera spread ``spread``
+    (:func:`_camera_spread`). Bundle adjustment leaves a map's scale free and a refinement
+    moves it: the canned folder's map, whose scale nothing gives (SfM units), grew 4.3 times
+    over the refinements of seven photos left out (its circles, 1 m apart, came 25-38 units
+    apart, beyond mesh.max_point_range_m); each refinement of it alone moved it 4-23 %."""
+    now = _camera_spread(rec)
+    if now > 0 and spread > 0:
+        rec.transform(pycolmap.Sim3d(spread / now, pycolmap.Rotation3d(), np.zeros(3)))
+
+
 def _bent_message(check: PersonCheck, runs: list[dict]) -> str:
     """The stage's stop when no map of a person's photos passes its check."""
     tried = "; ".join(
         f"{r['mapping']}: "
-        + ("failed" if "failed" in r else f"{r['contradicted_pairs']} contradicted pair(s), "
+        + ("failed" if "failed" in r else "skipped" if "skipped" in r else
+           f"{r['contradicted_pairs']} contradicted pair(s), "
            f"{r['off_plane']} photo(s) off the plane")
         for r in runs
     )  # fmt: skip
