@@ -490,16 +490,26 @@ class Config(Settings):
     def _person_pairs(self, info: ValidationInfo) -> Config:
         """A guided round's photos have no position to choose their match partners by (no
         odometry, no localization, no compass): unless set, every pair is matched up to
-        ``GUIDED_EXHAUSTIVE_MAX_IMAGES`` photos (the campaign's photo budget)."""
+        ``GUIDED_EXHAUSTIVE_MAX_IMAGES`` photos (the campaign's photo budget). The simulated
+        person's walk spreads its camera heights by ``person_sim.height_std_m``: the sfm
+        stage's eye-height plane (``sfm.person_height_std_m``) expects that unless set."""
         if not _received(info, "sfm"):
             return self
-        sfm = self.sfm
+        sfm, update = self.sfm, {}
         if (
             self.guided_rounds()
             and "exhaustive_max_images" not in sfm.model_fields_set
             and sfm.exhaustive_max_images != GUIDED_EXHAUSTIVE_MAX_IMAGES
         ):
-            update = {"exhaustive_max_images": GUIDED_EXHAUSTIVE_MAX_IMAGES}
+            update["exhaustive_max_images"] = GUIDED_EXHAUSTIVE_MAX_IMAGES
+        if (
+            self.robot == "person-sim"
+            and _received(info, "person_sim")
+            and "person_height_std_m" not in sfm.model_fields_set
+            and sfm.person_height_std_m != self.person_sim.height_std_m
+        ):  # the walk's heights spread as the simulated person holds the camera
+            update["person_height_std_m"] = self.person_sim.height_std_m
+        if update:
             object.__setattr__(self, "sfm", SfmConfig(**{**sfm.model_dump(), **update}))
         return self
 

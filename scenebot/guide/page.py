@@ -157,7 +157,7 @@ def _scale_bar(frame: _Frame, unit: str) -> str:
 def map_view(view: str, points: np.ndarray, taken: np.ndarray, names: list[str],
              shots: np.ndarray, intr: Intrinsics, unit: str) -> str:  # fmt: skip
     """One view of the map as SVG: the points, the photos taken (small frusta) and the shots
-    (frusta in their colours, numbered by rank).
+    (frusta in their colours, numbered by rank; shot 0 drawn on top of the others).
 
     Args:
         view: "top" (x, y) or "side" (x, z).
@@ -194,7 +194,7 @@ def map_view(view: str, points: np.ndarray, taken: np.ndarray, names: list[str],
         out.append(f'<g class="taken" data-photo="{i}"><title>{html.escape(name)}</title>'
                    f'<path d="{_segments(segs)}"/><circle cx="{c[0]:.1f}" cy="{c[1]:.1f}" '
                    'r="2.5"/></g>')  # fmt: skip
-    for k in range(len(shots)):
+    for k in reversed(range(len(shots))):  # the best shot last: on top, clickable where shots meet
         segs = frame.xy(shot_segs[k][..., [a, b]])
         c = frame.xy(shots[k, [a, b]])
         colour = SHOT_COLOURS[k % len(SHOT_COLOURS)]

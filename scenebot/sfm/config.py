@@ -407,6 +407,46 @@ class SfmConfig(Settings):
             "map.png shows the map tilted or upside down."
         ),
     )
+    person_min_pair_share: float = Field(
+        0.25,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "A person's map (robot: photos, guided, person-sim) is checked without the "
+            "truth (report.json person_check): a geometrically verified pair of photos (>= 30 "
+            "inlier matches whose rays the map makes meet at >= 4 deg) whose matches the map "
+            "holds as one 3D point for less than this "
+            "share of the median pair's share contradicts the map (a fold, or a photo "
+            "registered off: office walks 0-16 % at the folds, >= 30 % on every pair of maps "
+            "right within a few cm, median 70-80 %); a median pair below 30 % fails the map "
+            "as a whole. A map that fails is mapped again (global SfM unless a quarter of "
+            "the photos turned in place, then sfm.person_remap_attempts seeds); 0 turns the "
+            "check off."
+        ),
+    )
+    person_height_std_m: float = Field(
+        0.1,
+        ge=0.0,
+        description=(
+            "Guided campaigns (robot: guided, person-sim): round 0 is a walk around the room, "
+            "standing, and its camera centres lie within this standard deviation (m) of one "
+            "plane. A round-0 photo more than 4 times this off the robust plane of the others "
+            "is registered off, and a spread of more than 2 times this says the map is bent "
+            "(report.json person_check.plane); the plane's normal is the frame's up. "
+            "person-sim: its person_sim.height_std_m unless set. 0 turns the plane off."
+        ),
+    )
+    person_remap_attempts: int = Field(
+        2,
+        ge=0,
+        description=(
+            "When a person's map fails its check (sfm.person_min_pair_share, "
+            "sfm.person_height_std_m): after global SfM, incremental mapping runs again from "
+            "scratch with up to this many other seeds; the map the check finds least wrong "
+            "is kept, photos it still names are left out (down to "
+            "sfm.min_registered_share), else the stage stops with the check's reasons."
+        ),
+    )
 
     # --- outputs --------------------------------------------------------------------------
     plots: bool = Field(True, description="Write map.png and accuracy histograms.")

@@ -433,6 +433,19 @@ def _global_options(cfg: SfmConfig, names: list[str], fix_focal: bool):
     return opts
 
 
+def _global_mapping(
+    db_path: Path, image_root: Path, work: Path, cfg: SfmConfig, names: list[str], fix_focal: bool
+) -> dict[int, pycolmap.Reconstruction]:
+    """pycolmap's global SfM of ``names`` into ``work/global`` (replaced); its models."""
+    out = work / "global"
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    return pycolmap.global_mapping(
+        str(db_path), str(image_root), str(out), _global_options(cfg, names, fix_focal)
+    )
+
+
 def global_sfm_fallback(
     db_path: Path,
     image_root: Path,
@@ -472,14 +485,8 @@ def global_sfm_fallback(
     if not left:
         return models, "incremental", {}
     t = time.perf_counter()
-    out = work / "global"
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
     try:
-        glob = pycolmap.global_mapping(
-            str(db_path), str(image_root), str(out), _global_options(cfg, names, fix_focal)
-        )
+        glob = _global_mapping(db_path, image_root, work, cfg, names, fix_focal)
     except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
         log.warning("global SfM failed (%s): keeping the incremental model", exc)
         glob = {}
@@ -646,6 +653,47 @@ def map_photos(
     res = MappingResult(best, mode, len(ranked), dropped, attempts=attempts)
     res.mapper, res.global_sfm = mapper, global_sfm
     refine_globally(res, db_path, image_root, work, cfg, names, fix_focal, kept_previous)
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
+def map_globally(
+    db_path: Path,
+    image_root: Path,
+    names: list[str],
+    work: Path,
+    cfg: SfmConfig,
+    fix_focal: bool = False,
+) -> MappingResult:
+    """Map the photos ``names`` with global SfM (pycolmap's GLOMAP: rotations averaged over
+    every verified pair at once, then global positioning), keep the largest model and refine
+    it as :func:`map_photos` does; mode ``scratch``, mapper ``global``.
+
+    A loop of photos (a person's walk around a room) closes in global SfM by construction;
+    the incremental mapper grows the model along the loop, and a stretch of weakly
+    registered photos can fold it there before the loop closes (report.json
+    ``person_check``).
+
+    Raises:
+        SfmError: no model (the message names the photos without verified matches).
+    """
+    t0 = time.perf_counter()
+    try:
+        models = _global_mapping(db_path, image_root, work, cfg, names, fix_focal)
+    except Exception as exc:  # pycolmap raises RuntimeError/ValueError on bad input
+        raise SfmError(f"global SfM failed: {exc}") from exc
+    if not models:
+        dropped = _reasons(db_path, names, set(), set(), cfg)
+        raise SfmError(
+            "global SfM found no model; first photos without matches: "
+            + ", ".join(list(dropped)[:10])
+        )
+    ranked = sorted(models.values(), key=lambda r: r.num_reg_images(), reverse=True)
+    res = MappingResult(
+        ranked[0], "scratch", len(ranked), dropped_photos(db_path, names, ranked, cfg)
+    )
+    res.mapper = "global"
+    refine_globally(res, db_path, image_root, work, cfg, names, fix_focal, frozenset())
     res.seconds = time.perf_counter() - t0
     return res
 

@@ -26,7 +26,10 @@ cameras' image-up vectors says nothing about up (on the temple ring it is ~0). I
    strip (centres on a line, axes one way) is determined by the two cues together. Not
    determined: photos facing one way climbing stairs (tilted by the slope), a short arc
    looking steeply down. Each cue's own axis, their angle and warnings go to report.json
-   (``alignment.stats.up``); ``sfm.up_photo`` overrides the estimate.
+   (``alignment.stats.up``); ``sfm.up_photo`` overrides the estimate, and so does the
+   plane of a guided campaign's round-0 walk (photos taken standing at eye height, whose
+   heights spread by centimetres where a person tilts the camera by degrees:
+   :mod:`scenebot.sfm.person_check`).
 2. **Sign**: from the image-up vectors when they are informative (their mean component
    along the axis at least ``IMAGE_UP_INFORMATIVE``: most photos upright, or most upside
    down), else the sign that makes the cameras look down on average (photos of things
@@ -225,6 +228,7 @@ def person_frame_transform(
     *,
     known_distance: tuple[str, str, float] | None,
     up_photo: tuple[str, str] | None,
+    standing_up: np.ndarray | None = None,
 ) -> Alignment:
     """The similarity from the model's frame to a person's frame (module docstring).
 
@@ -234,6 +238,9 @@ def person_frame_transform(
         known_distance: ``(name_a, name_b, metres)`` between two camera centres, or None.
         up_photo: ``(name, side)``: the side of that photo that points up (overrides the
             estimate), or None.
+        standing_up: (3,) the normal (model frame) of the plane of the photos taken
+            standing at eye height (:mod:`scenebot.sfm.person_check`), or None: up, unless
+            ``up_photo`` is set (its sign: the estimate's).
 
     Returns:
         The alignment (:func:`fit_person_frame`).
@@ -243,7 +250,9 @@ def person_frame_transform(
     if len(names) < 2:
         raise ValueError("need at least 2 registered photos to align the model")
     C, U, V = _camera_geometry(rec, names)
-    return fit_person_frame(names, C, U, V, known_distance=known_distance, up_photo=up_photo)
+    return fit_person_frame(
+        names, C, U, V, known_distance=known_distance, up_photo=up_photo, standing_up=standing_up
+    )
 
 
 def fit_person_frame(
@@ -254,6 +263,7 @@ def fit_person_frame(
     *,
     known_distance: tuple[str, str, float] | None,
     up_photo: tuple[str, str] | None,
+    standing_up: np.ndarray | None = None,
 ) -> Alignment:
     """The person's frame from camera geometry arrays (core of
     :func:`person_frame_transform`).
@@ -262,7 +272,7 @@ def fit_person_frame(
         names: the registered photos, (N,), in capture order (the first sets the heading).
         C: (N, 3) camera centres; U: (N, 3) image-up vectors (-y of the camera); V: (N, 3)
             optical axes (+z); model frame.
-        known_distance, up_photo: see :func:`person_frame_transform`.
+        known_distance, up_photo, standing_up: see :func:`person_frame_transform`.
 
     Returns:
         The alignment; ``stats["up"]`` says which cues decided up and how well they agree
@@ -288,6 +298,18 @@ def fit_person_frame(
             "estimate": up_stats,
         }
         up = hint
+    elif standing_up is not None:
+        # the standing photos' camera heights spread a few cm over metres: their plane
+        # levels the frame far better than optical axes that a person tilts by degrees
+        n = np.asarray(standing_up, float) / np.linalg.norm(standing_up)
+        n = n if float(n @ up) >= 0 else -n
+        up_stats["downweighted_photos"] = [names[k] for k in up_stats["downweighted_photos"]]
+        up_stats = {
+            "source": "plane of the photos taken standing (sfm.person_height_std_m)",
+            "estimate_angle_deg": math.degrees(math.acos(np.clip(float(n @ up), -1, 1))),
+            "estimate": up_stats,
+        }
+        up = n
     else:
         up_stats["source"] = "photos"
         up_stats["downweighted_photos"] = [names[k] for k in up_stats["downweighted_photos"]]

@@ -38,11 +38,13 @@ from scenebot.sfm.features import check_database_photos, extract, match_pairs, o
 from scenebot.sfm.mapping import (
     MappingResult,
     SfmError,
+    map_globally,
     map_photos,
     mapping_options,
     refine_globally,
 )
 from scenebot.sfm.pairs import PairPrior, select_pairs
+from scenebot.sfm.person_check import TURNED_SHARE_NO_GLOBAL, PersonCheck, check_person_map
 from scenebot.sfm.person_frame import person_frame_transform
 from scenebot.sfm.photos import (
     Photo,
@@ -427,6 +429,9 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
     _check_registered(cfg, mres, len(s.photos))
 
     mres, alignment, scale_checks = _align(s, mres)
+    person_check: dict = {}
+    if s.person:
+        mres, alignment, person_check = _check_person_map(s, mres, alignment)
     _log_not_in_map(mres.dropped)
     t = time.perf_counter()
     align_to_robot_frame(mres.reconstruction, alignment)
@@ -455,6 +460,8 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
     report = _report(s, rec, mres, features, pairs, circle_stats, scale, alignment, acc)
     report["global_refinement"] = checks
     report["placed"] = placed
+    if s.person:
+        report["person_check"] = person_check
     outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
     shutil.rmtree(s.work, ignore_errors=True)
     return report
@@ -656,14 +663,7 @@ def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, 
     align_kw = _align_settings(s.cfg, s.previous)
     known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
     if s.person:
-        known = _person_known_distance(s, known)
-        up = s.cfg.up_photo
-        alignment = person_frame_transform(
-            mres.reconstruction,
-            s.photos,
-            known_distance=known,
-            up_photo=(_person_photo_name(s, up.image), up.side) if up else None,
-        )
+        alignment = _person_alignment(s, mres)
         s.timings["align"] = time.perf_counter() - t
         return mres, alignment, []
     alignment = robot_frame_transform(
@@ -675,6 +675,284 @@ def _align(s: _Session, mres: MappingResult) -> tuple[MappingResult, Alignment, 
     )
     s.timings["map"] += sum(c.get("seconds", 0.0) for c in scale_checks[1:])
     return mres, alignment, scale_checks
+
+
+def _person_alignment(
+    s: _Session, mres: MappingResult, standing_up: np.ndarray | None = None
+) -> Alignment:
+    """The person's frame of the mapped model (:func:`person_frame_transform`): the scale
+    from ``sfm.known_distance`` or the logged tape, up from ``sfm.up_photo``, else from the
+    standing photos' plane (``standing_up``, model frame), else estimated."""
+    kd = s.cfg.known_distance
+    known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
+    up = s.cfg.up_photo
+    return person_frame_transform(
+        mres.reconstruction,
+        s.photos,
+        known_distance=_person_known_distance(s, known),
+        up_photo=(_person_photo_name(s, up.image), up.side) if up else None,
+        standing_up=standing_up,
+    )
+
+
+def _standing_photos(s: _Session) -> list[str]:
+    """The photos taken standing at eye height: a guided campaign's round 0 (the walk around
+    the room); none for a photo folder (``robot: photos``), whose heights are the person's."""
+    return [p.name for p in s.photos if p.round == 0] if s.capture_dirs else []
+
+
+def _person_check(s: _Session, mres: MappingResult, alignment: Alignment) -> PersonCheck:
+    """:func:`check_person_map` of the mapped model (any frame) with its alignment."""
+    metric = alignment.scale_source != "none"
+    return check_person_map(
+        mres.reconstruction,
+        s.db_path,
+        standing=_standing_photos(s),
+        to_frame=(alignment.scale, alignment.R, alignment.t) if metric else None,
+        min_pair_share=s.cfg.person_min_pair_share,
+        height_std_m=s.cfg.person_height_std_m,
+    )
+
+
+def _unplaced(s: _Session, mres: MappingResult, check: PersonCheck) -> tuple[bool, bool, int, int]:
+    """How wrong a map of the person's photos is, for choosing among maps of the same
+    photos: failing its check, failing it as a whole (``check.whole``: no photo to leave
+    out makes it right), then photos not registered or named by the check, then
+    contradicted pairs (smaller is better)."""
+    missing = len(s.photos) - mres.reconstruction.num_reg_images()
+    named = missing + len(check.named_photos)
+    return not check.ok, check.whole, named, len(check.contradicted)
+
+
+def _person_remaps(s: _Session, check: PersonCheck, registered: int):
+    """The other ways to map a person's photos, in order: global SfM (not when at least
+    :data:`TURNED_SHARE_NO_GLOBAL` of the ``registered`` photos turned in place, as ``check``
+    of the first map finds them: ``map()`` is then None), then incremental mapping from
+    scratch with ``cfg.person_remap_attempts`` other seeds. Yields ``(how, map)`` with
+    ``map()`` the mapping result."""
+    cfg = s.cfg
+    turned = check.stats["pairs"].get("turned_in_place_photos", 0)
+    if turned >= TURNED_SHARE_NO_GLOBAL * registered:
+        log.warning(
+            "not mapping the person's photos with global SfM: %d of %d photos turned in "
+            "place, which global positioning cannot place",
+            turned,
+            registered,
+        )
+        yield "global SfM", lambda: None
+    else:
+        yield (
+            "global SfM",
+            lambda: map_globally(
+                s.db_path, s.root, s.names, s.work / "person_global", cfg, s.fix_focal
+            ),
+        )
+    for k in range(cfg.person_remap_attempts):
+        seed = cfg.random_seed + cfg.mapping_attempts + k
+        run_cfg = cfg.model_copy(update={"random_seed": seed, "mapping_attempts": 1})
+        yield f"incremental, seed {seed}", lambda c=run_cfg, k=k: map_photos(
+            s.db_path, s.root, s.names, s.work / f"person_remap_{k}", c,
+            fix_focal=s.fix_focal, person_photos=True,
+        )  # fmt: skip
+
+
+def _check_person_map(
+    s: _Session, mres: MappingResult, alignment: Alignment
+) -> tuple[MappingResult, Alignment, dict]:
+    """Check a person's map without the truth (:mod:`scenebot.sfm.person_check`) and react:
+    a map that fails is mapped again (:func:`_person_remaps`) until one passes, the least
+    wrong one kept (:func:`_unplaced`); the photos its check still names are left out (off
+    the eye-height plane first, then the photo in most contradicted pairs) while at least
+    ``cfg.min_registered_share`` of the photos stay; a map still failing stops the stage
+    with the check's reasons. The frame is then levelled by the standing photos' plane.
+
+    Returns:
+        The kept mapping result and its alignment (model not yet moved), and report.json's
+        ``person_check``.
+
+    Raises:
+        SfmError: no map of the photos passes the check.
+    """
+    cfg = s.cfg
+    if cfg.person_min_pair_share <= 0 and cfg.person_height_std_m <= 0:
+        return mres, alignment, {"ok": None, "note": "off (sfm.person_min_pair_share and "
+                                 "sfm.person_height_std_m are 0)"}  # fmt: skip
+    t = time.perf_counter()
+    check = _person_check(s, mres, alignment)
+    runs = [_check_record("as mapped", mres, check)]
+    best, kept = (mres, alignment, check), 0
+    if not check.ok:
+        log.warning("the person's map fails its check: %s", "; ".join(check.problems))
+        registered = mres.reconstruction.num_reg_images()
+        for how, remap in _person_remaps(s, check, registered):
+            log.warning("mapping the person's photos again: %s", how)
+            try:
+                m2 = remap()
+                if m2 is None:
+                    runs.append({"mapping": how, "skipped": "photos turned in place"})
+                    continue
+                a2 = _person_alignment(s, m2)
+            except (SfmError, ValueError) as exc:
+                log.warning("%s failed: %s", how, exc)
+                runs.append({"mapping": how, "failed": str(exc)})
+                continue
+            s.timings["map"] += m2.seconds
+            c2 = _person_check(s, m2, a2)
+            runs.append(_check_record(how, m2, c2))
+            if _unplaced(s, m2, c2) < _unplaced(s, best[0], best[2]):
+                best, kept = (m2, a2, c2), len(runs) - 1
+            if c2.ok:
+                break
+    mres, alignment, check = best
+    for i, r in enumerate(runs):
+        r["kept"] = i == kept
+    left_out: dict[str, str] = {}
+    if not check.ok:
+        alignment, check = _leave_out_named(s, mres, alignment, check, left_out)
+    if not check.ok:
+        raise SfmError(_bent_message(check, runs))
+    plane = check.stats.get("plane", {})
+    if plane.get("checked") and plane.get("planar"):
+        n_model = np.asarray(alignment.R).T @ np.asarray(plane["normal"])
+        alignment = _person_alignment(s, mres, standing_up=n_model)
+    report = check.as_dict() | {
+        "mapping_runs": runs,
+        "left_out": left_out,
+        "seconds": time.perf_counter() - t,
+    }
+    return mres, alignment, report
+
+
+def _check_record(how: str, mres: MappingResult, check: PersonCheck) -> dict:
+    """One mapping run's line in report.json ``person_check.mapping_runs``."""
+    return {
+        "mapping": how,
+        "mapper": mres.mapper,
+        "registered": mres.reconstruction.num_reg_images(),
+        "ok": check.ok,
+        "whole": check.whole,
+        "median_pair_share": check.stats["pairs"].get("median_share"),
+        "contradicted_pairs": len(check.contradicted),
+        "off_plane": len(check.off_plane),
+        "problems": check.problems,
+    }
+
+
+def _leave_out_named(
+    s: _Session,
+    mres: MappingResult,
+    alignment: Alignment,
+    check: PersonCheck,
+    left_out: dict[str, str],
+) -> tuple[Alignment, PersonCheck]:
+    """Take the photos the check names out of the map, one step at a time (those off the
+    eye-height plane, else the photo with the largest share of its verified pairs
+    contradicted, ties: more contradicted pairs, then fewer 3D points seen), re-triangulating
+    and refining the map and re-checking after each (a photo registered off drags the
+    tracks of the right photos it shares points with: office, a guided round, a photo 1.3 m
+    off left its right neighbour's pairs at 0-10 %), while at least
+    ``cfg.min_registered_share`` of the photos stay registered and the scale's photos stay
+    in; ``left_out`` (name -> reason) and ``mres.dropped`` receive them.
+
+    Returns:
+        The alignment and the check of the map without them.
+    """
+    floor = s.cfg.min_registered_share * len(s.photos)
+    step = 0
+    while not check.ok:
+        rec = mres.reconstruction
+        by_name = {rec.image(i).name: i for i in rec.reg_image_ids()}
+        if check.off_plane:
+            out = {
+                n: f"registered {r:+.2f} m off the eye-height plane of the person's other "
+                "standing photos (sfm.person_height_std_m)"
+                for n, r in check.off_plane.items()
+            }
+        elif check.contradicted:
+            count: dict[str, int] = {}
+            for a, b, *_ in check.contradicted:
+                for n in (a, b):
+                    count[n] = count.get(n, 0) + 1
+
+            checked = check.pairs_per_photo
+            worst = max(
+                count,
+                key=lambda n: (
+                    count[n] / max(checked.get(n, 1), 1),
+                    count[n],
+                    -rec.image(by_name[n]).num_points3D,
+                ),
+            )
+            others = sorted({b if a == worst else a for a, b, *_ in check.contradicted
+                             if worst in (a, b)})  # fmt: skip
+            out = {
+                worst: "its verified matches with "
+                + ", ".join(n.rsplit("/", 1)[-1] for n in others)
+                + " are not one 3D point in the map: registered off (sfm.person_min_pair_share)"
+            }
+        else:
+            break  # the walk as a whole is bent: no photo to blame
+        if rec.num_reg_images() - len(out) < floor:
+            break
+        for n, why in out.items():
+            rec.deregister_frame(rec.image(by_name[n]).frame_id)
+            left_out[n] = why
+            mres.dropped[n] = why
+        log.warning(
+            "left out of the person's map: %s", "; ".join(f"{n} ({w})" for n, w in out.items())
+        )
+        spread = _camera_spread(rec)
+        refine_globally(
+            mres, s.db_path, s.root, s.work / f"person_left_out_{step}", s.cfg, s.names,
+            s.fix_focal, _kept_previous(s, mres.continued),
+        )  # fmt: skip
+        _hold_camera_spread(mres.reconstruction, spread)
+        step += 1
+        try:
+            alignment = _person_alignment(s, mres)
+        except ValueError as exc:  # a photo of the scale left out
+            check.problems.append(str(exc))
+            break
+        check = _person_check(s, mres, alignment)
+    return alignment, check
+
+
+def _camera_spread(rec: pycolmap.Reconstruction) -> float:
+    """The median distance of the registered camera centres from their centroid (model
+    units)."""
+    C = np.array([rec.image(i).projection_center() for i in rec.reg_image_ids()])
+    return float(np.median(np.linalg.norm(C - C.mean(0), axis=1)))
+
+
+def _hold_camera_spread(rec: pycolmap.Reconstruction, spread: float) -> None:
+    """Scale ``rec`` about its origin back to the camera spread ``spread``
+    (:func:`_camera_spread`). Bundle adjustment leaves a map's scale free and a refinement
+    moves it: the canned folder's map, whose scale nothing gives (SfM units), grew 4.3 times
+    over the refinements of seven photos left out (its circles, 1 m apart, came 25-38 units
+    apart, beyond mesh.max_point_range_m); each refinement of it alone moved it 4-23 %."""
+    now = _camera_spread(rec)
+    if now > 0 and spread > 0:
+        rec.transform(pycolmap.Sim3d(spread / now, pycolmap.Rotation3d(), np.zeros(3)))
+
+
+def _bent_message(check: PersonCheck, runs: list[dict]) -> str:
+    """The stage's stop when no map of a person's photos passes its check."""
+    tried = "; ".join(
+        f"{r['mapping']}: "
+        + ("failed" if "failed" in r else "skipped" if "skipped" in r else
+           f"{r['contradicted_pairs']} contradicted pair(s), "
+           f"{r['off_plane']} photo(s) off the plane")
+        for r in runs
+    )  # fmt: skip
+    named = sorted(check.named_photos)
+    where = ", ".join(n.rsplit("/", 1)[-1] for n in named[:12]) or "the whole walk"
+    return (
+        "the person's map is bent or has photos registered off, in every way it was mapped "
+        f"({tried}): " + "; ".join(check.problems) + f". Near {where} the photos hold the map "
+        "weakly: add photos there (closer together, of textured surfaces) and run again; "
+        "report.json person_check has the pairs and heights (sfm.person_min_pair_share, "
+        "sfm.person_height_std_m)"
+    )
 
 
 def _person_known_distance(
