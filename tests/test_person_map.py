@@ -15,17 +15,11 @@ import pytest
 from scenebot.capture.person import run_perimeter_round
 from scenebot.config import Config
 from scenebot.sfm import stage
+from tests.fixtures.workflow import PERSON_WALK
 
 pytestmark = pytest.mark.slow  # a walk of 32 photos captured and mapped (~1-2 min)
 
-CONFIG = {
-    "scene": "office",
-    "robot": "person-sim",
-    "seed": 2,
-    "sim": {"camera": {"width": 320, "height": 240}},
-    "person_sim": {"perimeter_photos": 32},
-    "sfm": {"peak_threshold": 0.002, "exhaustive_max_images": 100, "num_threads": 1},
-}
+CONFIG = dict(PERSON_WALK, seed=2)
 
 
 @pytest.fixture(scope="module")

@@ -13,22 +13,12 @@ import pytest
 import yaml
 
 from scenebot.capturelog import photo_records, read_log
-from tests.fixtures.workflow import snakemake, why
+from tests.fixtures.workflow import PERSON_WALK, snakemake, why
 
 pytestmark = pytest.mark.slow  # two rounds of a small person's campaign (~5 min)
 
 K = 3
-CONFIG = {
-    "scene": "office",
-    "robot": "person-sim",
-    "max_rounds": 2,
-    # 160 x 120 photos of the office's white walls hold too few features for a walk of 32
-    "sim": {"camera": {"width": 320, "height": 240}},
-    "person_sim": {"perimeter_photos": 32},
-    "sfm": {"peak_threshold": 0.002, "exhaustive_max_images": 100, "num_threads": 1},
-    "score": {"n_candidates": 100},
-    "goals": {"k": K},
-}
+CONFIG = dict(PERSON_WALK, max_rounds=2, score={"n_candidates": 100}, goals={"k": K})
 TARGETS = [
     "results/office/round_001/fulfilment.json",
     "results/office/round_001/evaluation.json",
