@@ -110,15 +110,18 @@ def build_proxy(
     kq = min(max(k + 1, 9), len(pts))  # the point itself and its nearest neighbours
     m = cfg.outlier_min_neighbors
     filtering = cfg.outlier_radius > 0 and m > 0
-    # One k-nearest query serves the outlier test and the splat sizes, on both cores: "m
-    # others within r" is "the m-th nearest other point within r", the ball query's test
-    # (a ball query and a second tree took 2.6x as long on a campaign's 3.8 million points).
-    need = min(max(kq, m + 1), len(pts)) if filtering else kq
-    dist, idx = cKDTree(pts).query(pts, k=need, workers=-1)
-    if filtering:
-        sample = slice(None, None, max(1, len(pts) // 20000))
-        radius = cfg.outlier_radius * float(np.median(dist[sample, k]))
-        dense = dist[:, m] <= radius if m < need else np.zeros(len(pts), bool)
+    tree = cKDTree(pts)
+    if not filtering:
+        dist, idx = _knn(tree, pts, kq)
+    else:
+        sample = pts[:: max(1, len(pts) // 20000)]
+        radius = cfg.outlier_radius * float(np.median(tree.query(sample, k=k + 1)[0][:, k]))
+        # One k-nearest query serves the outlier test and the splat sizes, on both cores: "m
+        # others within r" is "the m-th nearest other point within r", the ball query's test;
+        # the neighbours among the points kept come from the same query (a ball query, a
+        # second tree and a second query took 3x as long on a campaign's 3.8 million points)
+        need = min(max(kq, m + 1), len(pts))
+        dense, near = _outliers_and_neighbours(tree, pts, need, m, radius)
         if dense.sum() < cfg.min_points:
             raise TourInputError(
                 f"{source}: only {int(dense.sum())} of {len(pts)} points have "
@@ -129,7 +132,7 @@ def build_proxy(
         keep = np.flatnonzero(ok)[dense]
         ok = np.zeros_like(ok)
         ok[keep] = True
-        dist, idx = _neighbours_among(pts, dense, dist, idx, kq)
+        dist, idx = _neighbours_among(pts, dense, near, kq)
         pts = pts[dense]
     k = min(k, len(pts) - 1)
     spacing = dist[:, k]
@@ -160,29 +163,63 @@ def build_proxy(
     )
 
 
+CHUNK = 200_000
+"""Points per k-nearest query (bounds the memory of the query's (chunk, k) arrays)."""
+
+
+def _knn(tree: cKDTree, pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` nearest points of each point (itself first): distances, indices."""
+    dist, idx = np.empty((len(pts), k)), np.empty((len(pts), k), np.int64)
+    for a in range(0, len(pts), CHUNK):
+        dist[a : a + CHUNK], idx[a : a + CHUNK] = tree.query(pts[a : a + CHUNK], k=k, workers=-1)
+    return dist, idx
+
+
+def _outliers_and_neighbours(
+    tree: cKDTree, pts: np.ndarray, need: int, m: int, radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: whether ``m`` others lie within ``radius`` (the ``m``-th nearest other),
+    and its ``need`` nearest points (int32 indices, by distance; the point first)."""
+    dense = np.zeros(len(pts), bool)
+    near = np.empty((len(pts), need), np.int32)
+    for a in range(0, len(pts), CHUNK):
+        d, i = tree.query(pts[a : a + CHUNK], k=need, workers=-1)
+        if m < need:
+            dense[a : a + CHUNK] = d[:, m] <= radius
+        near[a : a + CHUNK] = i
+    return dense, near
+
+
 def _neighbours_among(
-    pts: np.ndarray, kept: np.ndarray, dist: np.ndarray, idx: np.ndarray, kq: int
+    pts: np.ndarray, kept: np.ndarray, near: np.ndarray, kq: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """The ``kq`` nearest neighbours (the point first) of each kept point among the kept
-    points, from its nearest neighbours among all (``dist``, ``idx``, sorted by distance):
-    where at least ``kq`` of those are kept they are exactly the nearest kept ones; the
-    other points are queried again among the kept points.
+    points, from its nearest points among all (``near``, sorted by distance): where at least
+    ``kq`` of those are kept they are exactly the nearest kept ones; the other points are
+    queried again among the kept points.
 
     Returns:
         (n_kept, kq) distances and indices into the kept points.
     """
     new_index = np.cumsum(kept) - 1
-    d, i = dist[kept], idx[kept]
-    inside = kept[i]
-    order = np.argsort(~inside, axis=1, kind="stable")[:, :kq]
-    d = np.take_along_axis(d, order, axis=1)
-    i = new_index[np.take_along_axis(i, order, axis=1)]
-    short = np.flatnonzero(inside.sum(axis=1) < kq)
+    rows = np.flatnonzero(kept)
+    dist, idx = np.empty((len(rows), kq)), np.empty((len(rows), kq), np.int64)
+    short = []
+    for a in range(0, len(rows), CHUNK):
+        r = rows[a : a + CHUNK]
+        nb = near[r]
+        inside = kept[nb]
+        order = np.argsort(~inside, axis=1, kind="stable")[:, :kq]
+        nb = np.take_along_axis(nb, order, axis=1)
+        dist[a : a + CHUNK] = np.sqrt(((pts[nb] - pts[r, None]) ** 2).sum(axis=2))
+        idx[a : a + CHUNK] = new_index[nb]
+        short.append(a + np.flatnonzero(inside.sum(axis=1) < kq))
+    short = np.concatenate(short) if short else np.zeros(0, np.int64)
     if len(short):
         sub = pts[kept]
         kk = min(kq, len(sub))
-        d[short, :kk], i[short, :kk] = cKDTree(sub).query(sub[short], k=kk, workers=-1)
-    return d, i
+        dist[short, :kk], idx[short, :kk] = cKDTree(sub).query(sub[short], k=kk, workers=-1)
+    return dist, idx
 
 
 def _pca_normals(pts: np.ndarray, idx: np.ndarray) -> np.ndarray:
