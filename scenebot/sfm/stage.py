@@ -727,7 +727,7 @@ def _unplaced(s: _Session, mres: MappingResult, check: PersonCheck) -> tuple[boo
 def _person_remaps(s: _Session, check: PersonCheck, registered: int):
     """The other ways to map a person's photos, in order: global SfM (not when at least
     :data:`TURNED_SHARE_NO_GLOBAL` of the ``registered`` photos turned in place, as ``check``
-    of the first map finds them: ``map()`` is then None), then incremental mapping from
+    of the first map finds them: ``map`` is then None), then incremental mapping from
     scratch with ``cfg.person_remap_attempts`` other seeds (without global SfM's fallback when
     it is not tried itself). Yields ``(how, map)`` with ``map()`` the mapping result."""
     cfg = s.cfg
@@ -740,7 +740,7 @@ def _person_remaps(s: _Session, check: PersonCheck, registered: int):
             turned,
             registered,
         )
-        yield "global SfM", lambda: None
+        yield "global SfM", None
     else:
         yield (
             "global SfM",
@@ -789,12 +789,12 @@ def _check_person_map(
         log.warning("the person's map fails its check: %s", "; ".join(check.problems))
         registered = mres.reconstruction.num_reg_images()
         for how, remap in _person_remaps(s, check, registered):
+            if remap is None:
+                runs.append({"mapping": how, "skipped": "photos turned in place"})
+                continue
             log.warning("mapping the person's photos again: %s", how)
             try:
                 m2 = remap()
-                if m2 is None:
-                    runs.append({"mapping": how, "skipped": "photos turned in place"})
-                    continue
                 a2 = _person_alignment(s, m2)
             except (SfmError, ValueError) as exc:
                 log.warning("%s failed: %s", how, exc)
