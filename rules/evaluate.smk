@@ -144,7 +144,7 @@ rule validity:
         code=stage_code("validity"),
         candidates=validity_candidates,
         captures=validity_captures,
-        dense=f"{RESULTS}/final/dense/fused.ply",
+        proxy=f"{RESULTS}/final/tour/proxy.npz",
         dense_model=last_round_model,
     output:
         json=f"{RESULTS}/final/score_validity.json",
@@ -169,7 +169,7 @@ rule validity:
         dense_round=last_round_index,
     shell:
         "{params.py:q} -m scenebot validity --params {params.cfg:q} "
-        "--scene-dir {params.scene_dir:q} --round {params.round} --dense {input.dense:q} "
+        "--scene-dir {params.scene_dir:q} --round {params.round} --dense {input.proxy:q} "
         "--dense-round {params.dense_round} --out {output.json:q} 2> >(tee {log:q} >&2)"
 
 

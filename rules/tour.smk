@@ -2,11 +2,34 @@
 # tour.mp4 and a static web viewer (final/tour/index.html, works from file://).
 
 
+# The dense cloud prepared for rendering once (outliers dropped, splats sized; tens of
+# seconds for a campaign's millions of points): the tour and the score validity load it.
+rule proxy:
+    input:
+        code=stage_code("proxy"),
+        fused=f"{RESULTS}/final/dense/fused.ply",
+    output:
+        proxy=f"{RESULTS}/final/tour/proxy.npz",
+    log:
+        f"{RESULTS}/logs/proxy.log",
+    benchmark:
+        f"{RESULTS}/benchmarks/proxy.tsv"
+    conda:
+        "../envs/scenebot.yaml"
+    threads: ALL_CORES
+    params:
+        py=PY,
+        cfg=stage_params("tour"),
+    shell:
+        "{params.py:q} -m scenebot proxy --params {params.cfg:q} --dense {input.fused:q} "
+        "--out {output.proxy:q} 2> >(tee {log:q} >&2)"
+
+
 rule tour:
     input:
         code=stage_code("tour"),
         model=last_round_model,
-        fused=f"{RESULTS}/final/dense/fused.ply",
+        proxy=f"{RESULTS}/final/tour/proxy.npz",
         freespace=last_round_freespace,
     output:
         video=report(
@@ -32,5 +55,5 @@ rule tour:
         out=lambda w, output: Path(output.index).parent,
     shell:
         "{params.py:q} -m scenebot tour --params {params.cfg:q} --sparse {params.sparse:q} "
-        "--images {params.images:q} --dense {input.fused:q} --freespace {input.freespace:q} "
+        "--images {params.images:q} --dense {input.proxy:q} --freespace {input.freespace:q} "
         "--out {params.out:q} 2> >(tee {log:q} >&2)"

@@ -224,6 +224,20 @@ def cmd_tour(args) -> int:
     return 0
 
 
+def cmd_proxy(args) -> int:
+    import time
+
+    from scenebot.tour.proxy import load_proxy, save_proxy
+
+    cfg = _config(args)
+    t0 = time.perf_counter()
+    proxy = load_proxy(Path(args.dense), cfg.tour.proxy)
+    out = save_proxy(proxy, Path(args.out), cfg.tour.proxy, source=args.dense)
+    print(json.dumps({"proxy": str(out), "points": len(proxy),
+                      "seconds": round(time.perf_counter() - t0, 1)}))  # fmt: skip
+    return 0
+
+
 def cmd_campaign(args) -> int:
     from scenebot.campaign import write
 
@@ -362,11 +376,24 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", required=True, help="dense workspace (final/dense)")
     d.set_defaults(func=cmd_dense)
 
+    pr = sub.add_parser(
+        "proxy", help="the dense cloud prepared for rendering (the tour's and validity's proxy)"
+    )
+    with_config(pr)
+    pr.add_argument("--dense", required=True, help="dense cloud (final/dense/fused.ply)")
+    pr.add_argument("--out", required=True, help="prepared proxy (final/tour/proxy.npz)")
+    pr.set_defaults(func=cmd_proxy)
+
     t = sub.add_parser("tour", help="virtual tour: ULR frames, tour.mp4, web viewer")
     with_config(t)
     t.add_argument("--sparse", required=True, help="COLMAP model folder (round_XXX/sfm)")
     t.add_argument("--images", required=True, help="folder the model's image names live in")
-    t.add_argument("--dense", required=True, help="dense cloud (final/dense/fused.ply)")
+    t.add_argument(
+        "--dense",
+        required=True,
+        help="the proxy (final/tour/proxy.npz), or a dense cloud (final/dense/fused.ply) to "
+        "build it from",
+    )
     t.add_argument("--freespace", help="free space of the map (round_XXX/freespace.npz)")
     t.add_argument("--out", required=True, help="tour folder (final/tour)")
     t.add_argument("--no-progress", action="store_true")

@@ -33,7 +33,8 @@ PROFILE = ROOT / "profiles" / "slurm"
 SLURM_BINARIES = ("munged", "mungekey", "slurmctld", "slurmd", "sbatch", "squeue", "scancel")
 # the rules of a `robot: photos` campaign that run as SLURM jobs, and those that run here
 CLUSTER_RULES = {
-    "sfm", "mesh", "score", "goals", "goals_preview", "guide", "campaign", "dense", "tour",
+    "sfm", "mesh", "score", "goals", "goals_preview", "guide", "campaign", "dense", "proxy",
+    "tour",
 }  # fmt: skip
 LOCAL_RULES = {"timing", "all"}
 

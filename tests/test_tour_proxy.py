@@ -177,3 +177,31 @@ def test_a_moved_proxy_is_the_proxy_of_the_moved_cloud():
     np.testing.assert_allclose(moved.radius, direct.radius, rtol=1e-4)
     np.testing.assert_allclose(moved.normals, direct.normals, atol=1e-6)
     np.testing.assert_array_equal(moved.colors, direct.colors)
+
+
+def test_a_saved_proxy_loads_as_built_and_names_what_is_wrong(tmp_path, caplog):
+    """The proxy rule's file (``final/tour/proxy.npz``): the tour and the score validity
+    load the same arrays the build gave; a proxy built with other settings is used with a
+    warning that names them; a file that is no proxy, or none, is an error naming it."""
+    from scenebot.tour.proxy import load_proxy, read_proxy, save_proxy
+
+    rng = np.random.default_rng(2)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 60), np.linspace(0, 1, 50)), -1).reshape(-1, 2)
+    cloud = np.concatenate([g, rng.normal(0, 0.002, (len(g), 1))], 1)
+    col = rng.integers(0, 255, (len(cloud), 3)).astype(np.uint8)
+    cfg = ProxyConfig(min_points=100)
+    built = build_proxy(cloud, None, col, cfg)
+    path = save_proxy(built, tmp_path / "tour" / "proxy.npz", cfg, source="fused.ply")
+    assert not list(path.parent.glob("*.part"))  # written under its name only when whole
+    loaded = load_proxy(path, cfg)
+    for name in ("points", "normals", "colors", "radius"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(built, name))
+        assert getattr(loaded, name).dtype == getattr(built, name).dtype
+    assert not caplog.records
+    read_proxy(path, ProxyConfig(min_points=100, splat_scale=2.0))
+    assert "splat_scale" in caplog.text and str(path) in caplog.text
+    np.savez(tmp_path / "other.npz", points=cloud)
+    with pytest.raises(TourInputError, match=r"other\.npz: not a proxy"):
+        load_proxy(tmp_path / "other.npz", cfg)
+    with pytest.raises(TourInputError, match=r"gone\.npz: no prepared proxy.*proxy rule"):
+        load_proxy(tmp_path / "gone.npz", cfg)

@@ -190,7 +190,12 @@ def add_parsers(sub) -> None:
     f.set_defaults(func=cmd_reference)
     v.add_argument("--scene-dir", required=True, help="results/<scene>")
     v.add_argument("--round", type=int, help="round studied (default: evaluate.validity_round)")
-    v.add_argument("--dense", required=True, help="the campaign's fused cloud (PLY)")
+    v.add_argument(
+        "--dense",
+        required=True,
+        help="the campaign's proxy (final/tour/proxy.npz), or its fused cloud (PLY) to build "
+        "the proxy from",
+    )
     v.add_argument("--dense-round", type=int, required=True, help="round the cloud was made in")
     v.add_argument("--out", required=True, help="score_validity.json (the PNG goes beside it)")
     v.set_defaults(func=cmd_validity)

@@ -58,7 +58,8 @@ class ValidityInputs:
         round_dir: ``results/{scene}/round_{r}`` (``sfm/``, ``candidates.csv``).
         image_dir: folder the model's image names are relative to (``results/{scene}``).
         captures: capture folders of rounds 0..r (the photos' true poses, for the world frame).
-        dense_ply: the campaign's fused cloud (``final/dense/fused.ply``).
+        dense_ply: the campaign's proxy (``final/tour/proxy.npz``, the proxy rule) or its
+            fused cloud (``final/dense/fused.ply``) to build the proxy from.
         dense_sfm_dir: the map the dense cloud was made from (the last round's ``sfm/``).
     """
 

@@ -8,6 +8,8 @@ pixels with a push-pull pyramid (paper section V.C: "We handle holes in the rast
 cloud by interpolating the depths from nearby pixels").
 """
 
+import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +21,7 @@ from scipy.spatial import cKDTree
 from scenebot.tour.camera import Camera, TourInputError
 from scenebot.tour.config import ProxyConfig
 
+LOG = logging.getLogger(__name__)
 BIG = 1e30  # "no surface" depth in the z-buffer
 
 
@@ -229,17 +232,83 @@ def _pca_normals(pts: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return vec[:, :, 0]
 
 
+#: the settings :func:`build_proxy` reads (a prepared proxy records them)
+BUILD_SETTINGS = ("min_points", "spacing_knn", "outlier_radius", "outlier_min_neighbors",
+                  "splat_scale")  # fmt: skip
+_ARRAYS = ("points", "normals", "colors", "radius")
+
+
+def save_proxy(proxy: PointProxy, path: str | Path, cfg: ProxyConfig, source: str) -> Path:
+    """Write a prepared proxy (``final/tour/proxy.npz``, the proxy rule): its arrays, the
+    settings it was built with and the cloud it came from, so that the tour and the score
+    validity load it in a second instead of each building it again (tens of seconds for a
+    campaign's millions of points). Written to a temporary name, then renamed: a killed run
+    leaves no half file under the name."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    settings = {k: getattr(cfg, k) for k in BUILD_SETTINGS}
+    with tmp.open("wb") as fh:
+        np.savez(
+            fh,
+            **{k: getattr(proxy, k) for k in _ARRAYS},
+            settings=np.array(json.dumps(settings, sort_keys=True)),
+            source=np.array(str(source)),
+        )
+    tmp.replace(path)
+    return path
+
+
+def read_proxy(path: str | Path, cfg: ProxyConfig | None = None) -> PointProxy:
+    """Read a proxy :func:`save_proxy` wrote.
+
+    Args:
+        path: the ``.npz`` file.
+        cfg: the settings the caller would build with: a proxy built with other ones is
+            used, with a warning that names the settings (re-run the proxy rule).
+
+    Raises:
+        TourInputError: missing file, or not a proxy (arrays missing or of unequal length).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise TourInputError(f"{path}: no prepared proxy here; run the proxy rule first")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in _ARRAYS}
+            settings = json.loads(str(data["settings"]))
+    except (KeyError, ValueError, OSError) as err:
+        raise TourInputError(
+            f"{path}: not a proxy written by `python -m scenebot proxy` ({err}); build it "
+            "again from the dense cloud"
+        ) from err
+    n = len(arrays["points"])
+    if any(len(a) != n for a in arrays.values()):
+        raise TourInputError(f"{path}: its arrays differ in length; build the proxy again")
+    if cfg is not None:
+        changed = [k for k in BUILD_SETTINGS if settings.get(k) != getattr(cfg, k)]
+        if changed:
+            LOG.warning(
+                "%s was built with other tour.proxy settings (%s); using it as it is: re-run "
+                "the proxy rule to apply them", path, ", ".join(changed),
+            )  # fmt: skip
+    return PointProxy(**arrays)
+
+
 def load_proxy(ply_path: str | Path, cfg: ProxyConfig) -> PointProxy:
-    """Read a PLY cloud (COLMAP's ``fused.ply``: positions, normals, colours) as the proxy.
+    """The proxy of a cloud: a prepared one (``.npz``, :func:`save_proxy`) as it is, or a PLY
+    cloud (COLMAP's ``fused.ply``: positions, normals, colours) built into one.
 
     Raises:
         TourInputError: missing, unreadable, empty or too small cloud.
     """
-    import open3d as o3d
-
     path = Path(ply_path)
+    if path.suffix == ".npz":
+        return read_proxy(path, cfg)
     if not path.is_file():
         raise TourInputError(f"{path}: no dense cloud here; run the dense stage first")
+    import open3d as o3d
+
     pcd = o3d.io.read_point_cloud(str(path))
     pts = np.asarray(pcd.points)
     nrm = np.asarray(pcd.normals) if pcd.has_normals() else None

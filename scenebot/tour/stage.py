@@ -35,7 +35,8 @@ class TourInputs:
     Attributes:
         sparse_dir: COLMAP binary model of the last round (``results/{scene}/round_{r}/sfm``).
         image_dir: folder the model's image names are relative to (``results/{scene}``).
-        dense_ply: fused dense cloud (``results/{scene}/final/dense/fused.ply``).
+        dense_ply: the prepared proxy (``results/{scene}/final/tour/proxy.npz``, the proxy
+            rule) or the fused dense cloud (``final/dense/fused.ply``) to build it from.
         freespace_npz: optional free space of the last round (``round_{r}/freespace.npz``);
             never used for a person's photos.
         photos: the photos are a person's (``robot: photos``): six degrees of freedom, no
