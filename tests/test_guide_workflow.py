@@ -1,5 +1,7 @@
 """The guide page of a real small round: the canned photo set as a person's photo folder
-(``robot: photos``) through the workflow up to ``round_000/guide/index.html``; then the page in
+(``robot: photos``) through the workflow, its ``round_000/guide/index.html`` (the photo-folder
+campaign of tests/fixtures/workflow.py, run once per test session; its round 0 copied here,
+where the upload writes); then the page in
 headless Chromium (Selenium with the system chromedriver, as tests/test_tour_browser.py):
 clicking a shot highlights it on the map, and an upload through ``guide serve`` lands in the
 inbox, with no console errors. Screenshots go to ``$SCENEBOT_SCREENSHOT_DIR`` when set, else
@@ -10,39 +12,36 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from tests.fixtures.browser import chromium, needs_browser
-from tests.fixtures.workflow import CANNED, photo_folder, small_final_stages, snakemake, why
+from tests.fixtures.workflow import CANNED, shared_photo_campaign, why
+from tests.fixtures.workflow import GUIDE_SHOTS as K
 from tests.test_guide_page import data_uri_image, page_json, shot_cards
 
 pytestmark = [
-    pytest.mark.slow,  # sfm, mesh, score, goals and previews of 45 small photos (~2 min)
+    pytest.mark.slow,  # the photo-folder campaign of 45 small photos (shared, ~3 min)
     pytest.mark.skipif(not (CANNED / "log.jsonl").exists(), reason="canned photo set missing"),
 ]
-
-K = 3
 
 
 @pytest.fixture(scope="module")
 def guided_round(tmp_path_factory):
-    """The workdir, its round_000 and the photo folder (with its files' bytes)."""
+    """The workdir, its round_000 and the photo folder (with its files' bytes): the
+    photo-folder campaign's (sfm on one thread: on all threads it is not repeatable, and one
+    of its maps of these photos put a camera kilometres off, which left the person's 3-D free
+    space degenerate), its round 0 copied into a folder of this module's own."""
+    campaign = shared_photo_campaign(tmp_path_factory)
+    assert campaign.final.returncode == 0, why(campaign.final, campaign.workdir)
     workdir = tmp_path_factory.mktemp("guide")
-    folder, before, cfg = photo_folder(workdir / "my photos")
-    cfg = small_final_stages(cfg)
-    cfg["goals"] = {"k": K}
-    # one thread: SfM on all threads is not repeatable, and one of its maps of these photos
-    # put a camera kilometres off, which left the person's 3-D free space degenerate
-    cfg["sfm"]["num_threads"] = 1
-    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg))
-    res = snakemake(workdir, "results/office/round_000/guide/index.html")
-    assert res.returncode == 0, why(res, workdir)
-    return workdir, workdir / "results" / "office" / "round_000", folder, before
+    rnd = workdir / "results" / "office" / "round_000"
+    shutil.copytree(campaign.workdir / "results" / "office" / "round_000", rnd)
+    return workdir, rnd, campaign.folder, campaign.before
 
 
 def test_the_page_shows_the_rounds_shots(guided_round):
