@@ -188,6 +188,7 @@ def adaptive_capture_sections():
         "adaptive",
         "localize",
         "plan",
+        "score",  # the map points a localization photo could match (follow.min_matchable_points)
     )
 
 

@@ -507,3 +507,52 @@ def test_after_giving_up_the_robot_leaves_a_blind_pocket_by_the_way_it_came(tmp_
     end = [e for e in events if e.get("event") == "retrace_end"][-1]
     assert end["stop"] == "clear" and end["moved_m"] >= 1.0
     assert moved >= 0.95 and robot.true[0] < 0.8  # out of the pocket, on its open side
+
+
+class CountingPredictor:
+    """Test double of :class:`scenebot.capture.predict.MatchPredictor`: map points a photo
+    could match, by the robot's estimated heading (facing +y: a bare wall)."""
+
+    def __init__(self):
+        self.asked = []
+
+    def __call__(self, pose):
+        self.asked.append(pose)
+        return 0 if math.sin(pose.theta) > 0.9 else 500
+
+
+def test_no_photo_is_taken_where_the_map_predicts_nothing_to_match(tmp_path):
+    """follow.min_matchable_points: facing the bare wall the robot takes no localization
+    photo (logged localize_skipped, counted apart from the failures) and dead-reckons; its
+    first localization of the round is taken whatever the prediction (no fix yet, the
+    estimate may be anywhere); 0 turns the gate off."""
+    path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    runs = {}
+    for need in (10, 0):
+        robot = KinematicRobot((0.0, 0.0, math.pi / 2), turn_slip=0.05)
+        camera, pred = NullCamera(), CountingPredictor()
+        cfg = FollowConfig(camera_forward_m=CAM_FWD, min_matchable_points=need)
+        log_path = tmp_path / f"log_{need}.jsonl"
+        with CaptureLog(log_path) as log:
+            f = PathFollower(
+                robot, camera, OracleLocalizer(robot), GridPlanner(_open_grid(), SIMPLIFY),
+                cfg, tmp_path, log, initial_pose=Pose2D(0.0, 0.0, math.pi / 2),
+                trust_initial=False, predictor=pred,
+            )  # fmt: skip
+            first = f.localize_now()  # facing the wall, but no fix yet: taken
+            res = f.follow(path)
+        events = [r for r in read_log(log_path) if r.get("type") == "event"]
+        runs[need] = (res, camera.shots, events, pred)
+        assert first.ok and res.reached
+        assert math.hypot(robot.true[0] - 2.0, robot.true[1] - 2.0) < 0.1
+    res, shots, events, pred = runs[10]
+    skipped = [e for e in events if e["event"] == "localize_skipped"]
+    assert skipped and res.skipped_localizations == len(skipped)
+    assert all(e["predicted_points"] == 0 and e["min_matchable_points"] == 10 for e in skipped)
+    assert all(math.sin(e["estimate"]["theta"]) > 0.9 for e in skipped)  # only at the wall
+    assert not [e for e in events if e["event"] == "localize_failed"]
+    res0, shots0, _, pred0 = runs[0]
+    assert not pred0.asked and res0.skipped_localizations == 0
+    photo_events = ("localize", "localize_failed", "localize_rejected")
+    taken = [e for e in events if e["event"] in photo_events]
+    assert shots == len(taken) and shots < shots0  # a photo for every localization but those

@@ -298,6 +298,20 @@ def _follow_settings(cfg: Config, sfm_dir: Path):
     return fcfg
 
 
+def _predictor(cfg, fcfg, sfm_dir: Path):
+    """What the follower asks before a localization photo (``follow.min_matchable_points``):
+    the map points a photo from a pose could match; None when the gate is off."""
+    if fcfg.min_matchable_points <= 0:
+        return None
+    from scenebot.capture.predict import MatchPredictor
+
+    sc = cfg.score
+    return MatchPredictor(
+        sfm_dir, sc.match_angle_deg, sc.match_scale_ratio, sc.near_m,
+        fcfg.camera_forward_m, fcfg.camera_left_m,
+    )  # fmt: skip
+
+
 class _GoalVisits:
     """What the round does at each goal, for :func:`visit_goals`: drive there (``go``), take
     the photos (``shoot``), and log what happened (``event``)."""
@@ -404,7 +418,8 @@ def _run_adaptive(
         localizer = make_localizer(prev / "sfm", cfg.localize, cache_file=Path(tmp) / "i.flann")
         clog.write(
             session_record(
-                cfg, robot, world, round_index, {"world", "sim", "follow", "adaptive", "localize"},
+                cfg, robot, world, round_index,
+                {"world", "sim", "follow", "adaptive", "localize", "score"},
                 map=str(prev / "sfm"), map_sha1=map_fingerprint(prev / "sfm"),
                 previous_round_complete=goals_doc.get("complete"),
                 initial_estimate=initial.as_dict(),
@@ -415,7 +430,7 @@ def _run_adaptive(
         follower = PathFollower(
             robot, camera, localizer, planner, fcfg, capture_dir / "nav", clog,
             truth=getattr(robot, "truth_record", None), initial_pose=initial,
-            trust_initial=False,
+            trust_initial=False, predictor=_predictor(cfg, fcfg, prev / "sfm"),
         )  # fmt: skip
         visits = _GoalVisits(cfg, fcfg, robot, camera, follower, clog, capture_dir,
                              round_index, bar)  # fmt: skip

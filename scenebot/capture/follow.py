@@ -86,7 +86,8 @@ class FollowResult:
         pose: final estimated map pose.
         distance_m: estimated distance from the goal at the end (m).
         obstacles: bumps/stalls met.
-        localizations: successful visual fixes; ``failed_localizations``: failed ones.
+        localizations: successful visual fixes; ``failed_localizations``: failed ones;
+            ``skipped_localizations``: photos not taken, the map predicting too few matches.
         localized_at_goal: the final pose comes from a fix taken at the goal.
         confirmed_at_goal: and a second fix from the same spot agreed with it (``confirm_m``).
         goal_xy: the robot position driven to (m, map frame): the requested goal, or where
@@ -102,6 +103,7 @@ class FollowResult:
     obstacles: int = 0
     localizations: int = 0
     failed_localizations: int = 0
+    skipped_localizations: int = 0
     localized_at_goal: bool = False
     confirmed_at_goal: bool = False
     goal_xy: tuple[float, float] | None = None
@@ -118,6 +120,7 @@ class FollowResult:
             "obstacles": self.obstacles,
             "localizations": self.localizations,
             "failed_localizations": self.failed_localizations,
+            "skipped_localizations": self.skipped_localizations,
             "localized_at_goal": self.localized_at_goal,
             "confirmed_at_goal": self.confirmed_at_goal,
             "goal_xy": None if self.goal_xy is None else list(self.goal_xy),
@@ -150,6 +153,9 @@ class PathFollower:
         initial_pose: map pose to assume until the first successful fix.
         trust_initial: gate the first fix against ``initial_pose`` (False: accept any first
             fix, e.g. when the robot may have moved since ``initial_pose`` was known).
+        predictor: map pose -> map points a photo from there could match
+            (:class:`scenebot.capture.predict.MatchPredictor`); None: every localization
+            takes its photo.
     """
 
     TRAIL_LENGTH = 400  # motions kept for retracing
@@ -166,8 +172,10 @@ class PathFollower:
         truth: Callable[[], dict] | None = None,
         initial_pose: Pose2D | None = None,
         trust_initial: bool = True,
+        predictor: Callable[[Pose2D], int] | None = None,
     ):
         self.robot = robot
+        self.predictor = predictor
         self.camera = camera
         self.localizer = localizer
         self.planner = planner
@@ -270,12 +278,33 @@ class PathFollower:
         return str(path)
 
     def localize_now(self) -> PoseEstimate | LocalizationFailure:
-        """Take a photo and localize it; on success it becomes the new fix."""
+        """Take a photo and localize it; on success it becomes the new fix. No photo where
+        the map predicts fewer than ``min_matchable_points`` matches from the pose estimate
+        (once the robot has had a fix): :meth:`_predicted_unmatchable`."""
+        skip = self._predicted_unmatchable()
+        if skip is not None:
+            return skip
         dest = self.photo_dir / f"nav_g{self._goal_index:03d}_{self._photo_count:04d}.jpg"
         self._photo_count += 1
         reading = self.robot.sense()
         path = self.camera.capture(dest)
         return self.localize_photo(path, reading.odometry, reading.compass_deg)
+
+    def _predicted_unmatchable(self) -> LocalizationFailure | None:
+        """A failure (logged ``localize_skipped``) when the ``predictor`` counts fewer than
+        ``min_matchable_points`` map points the camera could match from the pose estimate;
+        None when a photo is worth taking (or there is no predictor, the gate is off, or no
+        fix yet: before the first fix the estimate may be anywhere)."""
+        need = self.cfg.min_matchable_points
+        if self.predictor is None or need <= 0 or not math.isfinite(self._since_fix_m):
+            return None
+        n = int(self.predictor(self.pose))
+        if n >= need:
+            return None
+        if self._result is not None:
+            self._result.skipped_localizations += 1
+        self._event("localize_skipped", predicted_points=n, min_matchable_points=need)
+        return LocalizationFailure(FailureReason.PREDICTED_UNMATCHABLE)
 
     def localize_photo(
         self, path: Path, odo: Pose2D, compass_deg: float | None = None

@@ -372,13 +372,15 @@ def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
       ``truth.robot``.
 
     Estimates are mapped to the world with ``sim`` (robot frame -> world). Events
-    ``localize_failed`` are counted.
+    ``localize_failed`` are counted, and ``localize_skipped`` (no photo taken: the map
+    predicted too few matches, ``follow.min_matchable_points``).
 
     Returns:
-        ``{"fixes": {...}, "photos": {...}, "failed_fixes": n}``, each with ``count``,
-        ``position_error_m`` / ``heading_error_deg`` statistics and ``per_estimate``.
+        ``{"fixes": {...}, "photos": {...}, "failed_fixes": n, "skipped_fixes": n}``, the
+        first two with ``count``, ``position_error_m`` / ``heading_error_deg`` statistics
+        and ``per_estimate``.
     """
-    fixes, photos, failed = [], [], 0
+    fixes, photos, failed, skipped = [], [], 0, 0
     for cap in captures:
         path = _log_path(cap)
         if not path.is_file():
@@ -387,6 +389,9 @@ def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
             kind, event = rec.get("type"), rec.get("event")
             if kind == "event" and event == "localize_failed":
                 failed += 1
+                continue
+            if kind == "event" and event == "localize_skipped":
+                skipped += 1
                 continue
             loc, tr = rec.get("localization"), rec.get("truth")
             if not isinstance(loc, dict) or not isinstance(tr, dict):
@@ -399,4 +404,9 @@ def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
                 continue
             if got is not None:
                 into.append((str(rec.get("image", "")), got[0], got[1]))
-    return {"fixes": _summary(fixes), "photos": _summary(photos), "failed_fixes": failed}
+    return {
+        "fixes": _summary(fixes),
+        "photos": _summary(photos),
+        "failed_fixes": failed,
+        "skipped_fixes": skipped,
+    }

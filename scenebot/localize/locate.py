@@ -36,6 +36,7 @@ class FailureReason(enum.StrEnum):
     UNCERTAIN_POSE = "uncertain_pose"
     INCONSISTENT_WITH_ODOMETRY = "inconsistent_with_odometry"
     INCONSISTENT_WITH_COMPASS = "inconsistent_with_compass"
+    PREDICTED_UNMATCHABLE = "predicted_unmatchable"  # no photo taken (follow.min_matchable_points)
 
 
 @dataclass(frozen=True)
