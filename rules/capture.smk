@@ -58,7 +58,7 @@ rule capture_adaptive:
         robot=1,
     params:
         py=PY,
-        cfg=stage_params(*adaptive_capture_sections()),
+        cfg=adaptive_capture_params(),
         out=lambda w, output: Path(output.log).parent,
         previous=lambda w: round_dir(int(w.r) - 1),
     shell:

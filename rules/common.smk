@@ -15,6 +15,7 @@ from scenebot.config import (
     section_json,
     validate_config,
 )
+from scenebot.capture.predict import SCORE_SETTINGS
 from scenebot.sfm.photofiles import photo_files
 
 # A wrong value stops the workflow here, naming the key and what to write (the typed model
@@ -188,8 +189,17 @@ def adaptive_capture_sections():
         "adaptive",
         "localize",
         "plan",
-        "score",  # the map points a localization photo could match (follow.min_matchable_points)
     )
+
+
+def adaptive_capture_params():
+    """The adaptive capture's parameters: its sections, and of `score` only the settings the
+    localization gate reads (follow.min_matchable_points; scenebot/capture/predict.py): a
+    change to the score's other settings re-decides the goals, never re-takes photos."""
+    doc = json.loads(stage_params(*adaptive_capture_sections()))
+    if not GUIDED:
+        doc["score"] = {k: getattr(CFG.score, k) for k in SCORE_SETTINGS}
+    return json.dumps(doc, sort_keys=True, separators=(",", ":"))
 
 
 def previous_goals(wildcards):

@@ -22,10 +22,10 @@ def wall_map(folder, pitch_deg: float = 0.0):
     """Two photos 0.5 m apart facing +x (heading 0, camera ``FWD`` ahead of the robot's axis,
     tilted up by ``pitch_deg``) and 120 points on the wall x = 2.5 both of them see."""
     rec = pycolmap.Reconstruction()
-    rec.add_camera_with_trivial_rig(
-        pycolmap.Camera(model="PINHOLE", width=W, height=H, params=[F, F, W / 2, H / 2],
-                        camera_id=1)  # fmt: skip
+    cam = pycolmap.Camera(
+        model="PINHOLE", width=W, height=H, params=[F, F, W / 2, H / 2], camera_id=1
     )
+    rec.add_camera_with_trivial_rig(cam)
     p = math.radians(pitch_deg)
     tilt = np.array([[1, 0, 0], [0, math.cos(p), math.sin(p)], [0, -math.sin(p), math.cos(p)]])
     R = tilt @ look_rotation(0.0)  # the optical axis raised by the pitch
@@ -55,9 +55,7 @@ def predictor(folder):
 
 
 @pytest.mark.parametrize("pitch_deg", [0.0, 12.0])
-def test_a_photo_facing_the_mapped_wall_could_match_it_one_facing_away_nothing(
-    tmp_path, pitch_deg
-):
+def test_a_photo_facing_the_mapped_wall_could_match_it_one_facing_away_nothing(tmp_path, pitch_deg):
     n = wall_map(tmp_path, pitch_deg)
     pred = predictor(tmp_path)
     assert pred.pitch == pytest.approx(math.radians(pitch_deg), abs=1e-9)  # the mount

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from scenebot.capture.predict import SCORE_SETTINGS, MatchPredictor
 from scenebot.capturelog import CaptureLog, map_fingerprint, write_faults
 from scenebot.config import Config
 from scenebot.geometry import read_map_geometry, robot_xy_for_camera
@@ -303,13 +304,8 @@ def _predictor(cfg, fcfg, sfm_dir: Path):
     the map points a photo from a pose could match; None when the gate is off."""
     if fcfg.min_matchable_points <= 0:
         return None
-    from scenebot.capture.predict import MatchPredictor
-
-    sc = cfg.score
-    return MatchPredictor(
-        sfm_dir, sc.match_angle_deg, sc.match_scale_ratio, sc.near_m,
-        fcfg.camera_forward_m, fcfg.camera_left_m,
-    )  # fmt: skip
+    match = [getattr(cfg.score, k) for k in SCORE_SETTINGS]
+    return MatchPredictor(sfm_dir, *match, fcfg.camera_forward_m, fcfg.camera_left_m)
 
 
 class _GoalVisits:
@@ -418,9 +414,9 @@ def _run_adaptive(
         localizer = make_localizer(prev / "sfm", cfg.localize, cache_file=Path(tmp) / "i.flann")
         clog.write(
             session_record(
-                cfg, robot, world, round_index,
-                {"world", "sim", "follow", "adaptive", "localize", "score"},
+                cfg, robot, world, round_index, {"world", "sim", "follow", "adaptive", "localize"},
                 map=str(prev / "sfm"), map_sha1=map_fingerprint(prev / "sfm"),
+                match_settings={k: getattr(cfg.score, k) for k in SCORE_SETTINGS},
                 previous_round_complete=goals_doc.get("complete"),
                 initial_estimate=initial.as_dict(),
             )

@@ -32,6 +32,11 @@ from scenebot.robot.base import Pose2D
 from scenebot.score.geometry import person_views
 from scenebot.score.matchable import matchable_points
 
+SCORE_SETTINGS = ("match_angle_deg", "match_scale_ratio", "near_m")
+"""The ``score`` settings the count reads: the adaptive capture receives these alone, so that
+a change to the score's other settings re-decides the goals but never re-takes a finished
+round's photos (``rules/common.smk``, ``adaptive_capture_params``)."""
+
 
 class MatchPredictor:
     """``pose -> map points a photo from there could match`` for one map.
