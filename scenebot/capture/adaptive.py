@@ -299,13 +299,15 @@ def _follow_settings(cfg: Config, sfm_dir: Path):
     return fcfg
 
 
-def _predictor(cfg, fcfg, sfm_dir: Path):
+def _predictor(fcfg, sfm_dir: Path, match: dict):
     """What the follower asks before a localization photo (``follow.min_matchable_points``):
-    the map points a photo from a pose could match; None when the gate is off."""
+    the map points a photo from a pose could match (``match``: the score settings it reads,
+    by name); None when the gate is off."""
     if fcfg.min_matchable_points <= 0:
         return None
-    match = [getattr(cfg.score, k) for k in SCORE_SETTINGS]
-    return MatchPredictor(sfm_dir, *match, fcfg.camera_forward_m, fcfg.camera_left_m)
+    return MatchPredictor(
+        sfm_dir, **match, forward_m=fcfg.camera_forward_m, left_m=fcfg.camera_left_m
+    )
 
 
 class _GoalVisits:
@@ -412,11 +414,12 @@ def _run_adaptive(
         robot,
     ):
         localizer = make_localizer(prev / "sfm", cfg.localize, cache_file=Path(tmp) / "i.flann")
+        match = {k: getattr(cfg.score, k) for k in SCORE_SETTINGS}  # the gate's settings
         clog.write(
             session_record(
                 cfg, robot, world, round_index, {"world", "sim", "follow", "adaptive", "localize"},
                 map=str(prev / "sfm"), map_sha1=map_fingerprint(prev / "sfm"),
-                match_settings={k: getattr(cfg.score, k) for k in SCORE_SETTINGS},
+                match_settings=match,
                 previous_round_complete=goals_doc.get("complete"),
                 initial_estimate=initial.as_dict(),
             )
@@ -426,7 +429,7 @@ def _run_adaptive(
         follower = PathFollower(
             robot, camera, localizer, planner, fcfg, capture_dir / "nav", clog,
             truth=getattr(robot, "truth_record", None), initial_pose=initial,
-            trust_initial=False, predictor=_predictor(cfg, fcfg, prev / "sfm"),
+            trust_initial=False, predictor=_predictor(fcfg, prev / "sfm", match),
         )  # fmt: skip
         visits = _GoalVisits(cfg, fcfg, robot, camera, follower, clog, capture_dir,
                              round_index, bar)  # fmt: skip
