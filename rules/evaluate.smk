@@ -110,6 +110,7 @@ rule evaluate_final:
         f"{RESULTS}/logs/evaluate_final.log",
     benchmark:
         f"{RESULTS}/benchmarks/evaluate_final.tsv"
+    priority: 1
     conda:
         "../envs/scenebot.yaml"
     params:
@@ -139,6 +140,7 @@ rule evaluation:
 # Score validity (paper IV.B's key claim, tested): random scored candidates of one round
 # (evaluate.validity_round, default 0) rendered by ULR from that round's photos and by the
 # simulator from the truth; Spearman's rho between the heuristic score and PSNR.
+# One core: it runs beside the final evaluation (see rule proxy).
 rule validity:
     input:
         code=stage_code("validity"),
@@ -158,9 +160,9 @@ rule validity:
         f"{RESULTS}/logs/validity.log",
     benchmark:
         f"{RESULTS}/benchmarks/validity.tsv"
+    priority: 1
     conda:
         "../envs/scenebot.yaml"
-    threads: ALL_CORES
     params:
         py=PY,
         cfg=stage_params("world", "sim", "evaluate", "tour", "goals"),

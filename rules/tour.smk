@@ -4,6 +4,8 @@
 
 # The dense cloud prepared for rendering once (outliers dropped, splats sized; tens of
 # seconds for a campaign's millions of points): the tour and the score validity load it.
+# After the dense stage the proxy goes first (priority 2), on both cores; then the final
+# evaluation and the score validity (priority 1, one core each) side by side; then the tour.
 rule proxy:
     input:
         code=stage_code("proxy"),
@@ -14,6 +16,7 @@ rule proxy:
         f"{RESULTS}/logs/proxy.log",
     benchmark:
         f"{RESULTS}/benchmarks/proxy.tsv"
+    priority: 2
     conda:
         "../envs/scenebot.yaml"
     threads: ALL_CORES

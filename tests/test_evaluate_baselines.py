@@ -71,7 +71,7 @@ def test_a_nested_baseline_imports_the_package_beside_its_snakefile(tmp_path, mo
     seen = {}
 
     def fake_run(cmd, **kw):
-        seen.update(kw)
+        seen.update(kw, cmd=cmd)
         return subprocess.CompletedProcess(cmd, 1)
 
     monkeypatch.setattr(baselines.subprocess, "run", fake_run)
@@ -82,3 +82,6 @@ def test_a_nested_baseline_imports_the_package_beside_its_snakefile(tmp_path, mo
     paths = seen["env"]["PYTHONPATH"].split(":")
     assert paths == [str(workflow.resolve()), "/elsewhere"]
     assert seen["cwd"] == (scene_dir / "baselines" / "random").resolve()
+    # the baseline is built up to what the comparison reads: no tour, no score validity
+    assert seen["cmd"][-2:] == ["results/office/campaign.json",
+                                "results/office/final/evaluation.json"]  # fmt: skip

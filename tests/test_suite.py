@@ -26,6 +26,7 @@ from scenebot.evaluate.suite import (
 )
 from tests.fixtures.workflow import (
     CANNED,
+    CANNED_SFM,
     ROOT,
     SMALL,
     SNAKEMAKE,
@@ -213,7 +214,7 @@ MINI = dict(
     max_rounds=1,
     sim={"camera": {"width": 320, "height": 240}},
     exploration={"photos": 45, "circle_step_deg": 20.0},  # the canned set's capture settings
-    sfm={"peak_threshold": 0.002},
+    sfm=CANNED_SFM,
     evaluate={"validity_candidates": 0, "sample_spacing_m": 0.05, "grid_step_m": 0.5,
               "headings": 4},
     suite={"scenes": [{"name": "office", "builtin": "office", "seed": 7},
@@ -275,6 +276,8 @@ def test_a_two_scene_mini_suite_runs_through_the_suite_rules(workdir):
         assert base["random"]["photos"] == 45
         shots = suite / name / "baselines" / "random" / "results" / "suite" / name
         assert len(list(shots.glob("round_000/capture/images/*.jpg"))) == 45
+        assert (shots / "final" / "dense" / "fused.ply").is_file()
+        assert not (shots / "final" / "tour").exists()  # a baseline needs no tour
     comps = sorted(r["completeness_2cm"] for r in rows.values())
     assert doc["median"]["completeness_2cm"] == pytest.approx(sum(comps) / 2)
     assert doc["worst"]["completeness_2cm"] == comps[0]

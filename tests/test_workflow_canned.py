@@ -13,6 +13,7 @@ import yaml
 
 from tests.fixtures.workflow import (
     CANNED,
+    CANNED_SFM,
     CAPTURE,
     ROOT,
     SMALL,
@@ -33,7 +34,7 @@ def test_every_stage_runs_on_the_canned_photo_set(workdir):
         SMALL,
         max_rounds=2,
         sim={"camera": {"width": 320, "height": 240}},
-        sfm={"peak_threshold": 0.002},
+        sfm=CANNED_SFM,
         score={"n_candidates": 300},
         goals={"k": 3},
         adaptive={"fan_photos": 3},

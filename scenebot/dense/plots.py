@@ -47,20 +47,51 @@ def splat(
     keep = pc[:, 2] > 0.05
     pc, col = pc[keep], colors[keep]
     uv = (pc @ K.T)[:, :2] / pc[:, 2:3]
-    u = np.floor(uv[:, 0]).astype(int)
-    v = np.floor(uv[:, 1]).astype(int)
     order = np.argsort(-pc[:, 2])  # far first, near last (last write wins)
+    u = np.floor(uv[order, 0]).astype(np.int64)
+    v = np.floor(uv[order, 1]).astype(np.int64)
+    z, col = pc[order, 2], col[order]
     img = np.ones((height, width, 3))
     zbuf = np.full((height, width), np.inf)
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
-            uu, vv = u[order] + dx, v[order] + dy
+            uu, vv = u + dx, v + dy
             ok = (uu >= 0) & (uu < width) & (vv >= 0) & (vv < height)
-            uu, vv, zz, cc = uu[ok], vv[ok], pc[order, 2][ok], col[order][ok]
-            closer = zz < zbuf[vv, uu] + 0.02  # within-pass order already near-last
-            img[vv[closer], uu[closer]] = cc[closer]
-            np.minimum.at(zbuf, (vv[closer], uu[closer]), zz[closer])
+            uu, vv, zz, cc = uu[ok], vv[ok], z[ok], col[ok]
+            closer = zz < zbuf[vv, uu] + 0.02
+            uu, vv, zz = uu[closer], vv[closer], zz[closer]
+            img[vv, uu] = cc[closer]
+            # the pass runs far to near, so a pixel's last write is its nearest point
+            zbuf[vv, uu] = np.minimum(zbuf[vv, uu], zz)
     return img
+
+
+def top_view(
+    points: np.ndarray, colors: np.ndarray, max_px: int = 800
+) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The cloud seen from above as an image: each cell shows its highest point's colour.
+
+    Args:
+        points: (N, 3) world points, metres (z up).
+        colors: (N, 3) RGB in [0, 1].
+        max_px: cells along the longer side.
+
+    Returns:
+        (H, W, 3) image (white where no point; row 0 at the smallest y) and its extent
+        (x0, x1, y0, y1) in metres, as ``imshow(..., origin="lower", extent=...)`` takes them.
+    """
+    lo = points[:, :2].min(axis=0)
+    cell = max(float((points[:, :2].max(axis=0) - lo).max()) / max_px, 1e-6)
+    ij = np.minimum(np.floor((points[:, :2] - lo) / cell).astype(np.int64), max_px - 1)
+    w, h = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
+    flat = ij[:, 1] * w + ij[:, 0]
+    order = np.lexsort((points[:, 2], flat))  # by cell, then height
+    last = np.r_[flat[order][1:] != flat[order][:-1], True]  # each cell's highest point
+    top = order[last]
+    img = np.ones((h * w, 3))
+    img[flat[top]] = colors[top]
+    extent = (float(lo[0]), float(lo[0] + w * cell), float(lo[1]), float(lo[1] + h * cell))
+    return img.reshape(h, w, 3), extent
 
 
 def plot_fused_views(
@@ -83,8 +114,8 @@ def plot_fused_views(
     fig, axes = plt.subplots(1, num_views + 1, figsize=(4.2 * (num_views + 1), 3.6))
     ax = axes[0]
     if len(pts):
-        order = np.argsort(pts[:, 2])
-        ax.scatter(pts[order, 0], pts[order, 1], c=cols[order], s=0.2, marker=".", linewidths=0)
+        img, extent = top_view(pts, cols)
+        ax.imshow(img, origin="lower", extent=extent, interpolation="nearest")
     centers = np.array([rec.image(i).projection_center() for i in ids])
     ax.plot(centers[:, 0], centers[:, 1], "r.", ms=3, label="cameras")
     ax.set_aspect("equal")

@@ -9,13 +9,14 @@ Three campaigns of the same simulated scene, each evaluated against the true sur
 * ``frontier``: the same rounds as the adaptive campaign, goals from the frontier-style
   chooser (``goals.method: frontier``: nearest boundary of seen and unseen free space).
 
-Each baseline is a full campaign of this workflow in ``results/{scene}/baselines/<name>/``
-(run by a nested ``snakemake`` with the campaign's config plus the overrides above), so every
-intermediate stays there to open. ``baselines.json`` and ``baselines.png`` sum them up: per
-campaign, the coverage curve (share of the observable area seen by >= 1 and >= 2 of the first
-n photos in capture order, n = 5, 10, ..., N: ``coverage_by_photos`` of its
-``final/evaluation.json``, :func:`scenebot.evaluate.breakdown.coverage_by_photo_count`) with
-the dense completeness at N, and the dense accuracy.
+Each baseline is a campaign of this workflow in ``results/{scene}/baselines/<name>/`` (run by
+a nested ``snakemake`` with the campaign's config plus the overrides above, up to its dense
+model's evaluation: no tour or score validity), so every intermediate stays there to open.
+``baselines.json`` and ``baselines.png`` sum them up: per campaign, the coverage curve (share
+of the observable area seen by >= 1 and >= 2 of the first n photos in capture order, n = 5,
+10, ..., N: ``coverage_by_photos`` of its ``final/evaluation.json``,
+:func:`scenebot.evaluate.breakdown.coverage_by_photo_count`) with the dense completeness at N,
+and the dense accuracy.
 
 :func:`refresh_baselines` (``python -m scenebot baselines --replot-only``) summarizes the
 campaigns already run again and redraws the plot without running anything; a campaign
@@ -208,15 +209,19 @@ def run_baselines(
         cfg = baseline_config(campaign_cfg, method, adaptive["photos"], adaptive["rounds"])
         (work / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
         log = work / "snakemake.log"
+        scene = cfg.get("scene", "office")
+        # what the comparison reads: the campaign and its evaluation (dense model included),
+        # not the tour, the score validity or the timing picture of a baseline
+        targets = [f"results/{scene}/campaign.json", f"results/{scene}/final/evaluation.json"]
         cmd = [sys.executable, "-m", "snakemake", "-s", str(snakefile), "-d", str(work),
-               "--configfile", str(work / "config.yaml"), "--cores", str(cores)]  # fmt: skip
+               "--configfile", str(work / "config.yaml"), "--cores", str(cores),
+               *targets]  # fmt: skip
         LOG.info("baseline %s: %s (log %s)", method, " ".join(cmd), log)
         with open(log, "w") as fh:
             res = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=work,
                                  env=_nested_env(snakefile))  # fmt: skip
         if res.returncode != 0:
             raise EvaluationError(f"baseline {method} failed (exit {res.returncode}); see {log}")
-        scene = cfg.get("scene", "office")
         out[method] = _summary(work / "results" / scene)
         configs[method] = cfg
     _fill_coverage(out, configs)
