@@ -439,6 +439,39 @@ def test_of_two_shadow_planes_with_as_many_views_the_one_with_fewer_points_goes(
     assert [depth[j] for j in why] == [2.97]
 
 
+def test_of_two_shadow_planes_the_views_prefer_the_one_holding_their_points():
+    """A plane 4 cm in front of the wall with more points than the wall (RANSAC found it in
+    a denser sample) and as many views supporting both (each measured a strip of it, as a
+    tilted plane crossing the wall is near some of every view's points): most of each view's
+    points lie on the wall, so the views prefer the wall and the other plane goes, whatever
+    its points and support."""
+    from scenebot.dense.planes.phantoms import shadow_planes, view_preferences
+
+    wall_pts = backproject(wall(3.0), K, R, T).reshape(-1, 3)[::3]
+    shadow_pts = backproject(wall(2.96), K, R, T).reshape(-1, 3)
+    planes = detect_planes(
+        np.r_[wall_pts, shadow_pts], **detect_kw(distance_m=0.01, min_share=0.05)
+    )
+    assert len(planes) == 2
+    depth = [round(-p.offset / p.normal[2], 2) for p in planes]
+    wall_j = depth.index(3.0)
+    assert planes[wall_j].inliers < planes[1 - wall_j].inliers
+    prefer = np.zeros((2, 2), np.int64)
+    for k in range(5):  # five views, each measuring most of the wall at 3 m, a strip at 2.96
+        d = wall(3.0)
+        d[:, : d.shape[1] * (k + 1) // 12] = 2.96
+        on, _, _ = plane_evidence(d, K, R, T, planes, distance_m=0.02, rel_distance=0.0)
+        assert (on >= CFG.support_min_points).all()  # every view supports both planes
+        prefer += view_preferences(on, CFG.support_min_points)
+    assert prefer[wall_j, 1 - wall_j] == 5 and prefer[1 - wall_j, wall_j] == 0
+    kw = {"max_gap_m": 0.1, "max_angle_deg": CFG.merge_angle_deg}
+    why = shadow_planes(planes, np.array([5, 5]), prefer=prefer, **kw)
+    assert [depth[j] for j in why] == [2.96]
+    assert "5 on the other" in why[1 - wall_j]
+    # without the views' votes the one with more points would have stayed
+    assert [depth[j] for j in shadow_planes(planes, np.array([5, 5]), **kw)] == [3.0]
+
+
 def test_an_object_face_the_view_sees_through_neither_culls_nor_fills_it():
     """A box face's plane (no boundary) whose extent reaches across this view at 1 m, where
     the view measured the wall at 3 m through it: the face is wrong here (the camera stands

@@ -438,6 +438,40 @@ def test_photos_that_match_no_map_point_leave_the_fast_path_on_it(round0, round1
     assert report["registered"] == 60 and len(new) == 24 and max(new.values()) < 0.02
 
 
+def test_a_round_whose_photos_do_not_join_keeps_the_map_and_says_so(round0, round1, tmp_path):
+    """Round 1's photos are all of something else: none joins round 0's map, so 36 of 60
+    photos are registered (< sfm.min_registered_share). The map still holds every photo of
+    round 0's: the stage goes on with it and reports the short round (the goals stage's stuck
+    rule stops a campaign that keeps failing so) instead of stopping the workflow."""
+    from scenebot.capturelog import read_log
+
+    base = round0[0]
+    scene = tmp_path / "scene"
+    shutil.copytree(base / "round_000", scene / "round_000")
+    shutil.copytree(base / "sfm_db", scene / "sfm_db")
+    cap1 = scene / "round_001" / "capture"
+    shutil.copytree(round1[0], cap1)
+    rng = np.random.default_rng(7)
+    photos = [r for r in read_log(cap1 / "log.jsonl") if r.get("type") == "photo"]
+    focal = photo_focal(cap1 / photos[0]["image"])
+    for r in photos:  # new files under new names: the database holds the old ones' features
+        noise = rng.integers(0, 256, (240 // 8, 320 // 8, 3)).astype(np.uint8)
+        (cap1 / r["image"]).unlink()
+        r["image"] = r["image"].replace(".jpg", "_x.jpg")
+        write_jpeg_with_exif(cap1 / r["image"], np.kron(noise, np.ones((8, 8, 1), np.uint8)), focal)
+    records = [r for r in read_log(cap1 / "log.jsonl") if r.get("type") != "photo"]
+    body = [r for r in records if r.get("type") != "end"] + photos
+    body += [r for r in records if r.get("type") == "end"]
+    (cap1 / "log.jsonl").write_text("".join(json.dumps(r) + "\n" for r in body))
+    report, _, new = _run_round1(
+        scene, scene / "round_000" / "capture", cap1, scene / "round_000" / "sfm", "sfm1"
+    )
+    short = report["short_round"]
+    assert short["previous_map"] == short["previous_kept"] == report["registered"] == 36
+    assert short["joined"] == 0 and not new and short["photos"] == 36 + len(photos)
+    assert (scene / "sfm1" / "images.bin").is_file()
+
+
 def photo_focal(path) -> float:
     """The focal length (px) a photo's EXIF gives."""
     from scenebot.jpeg import exif_focal_px

@@ -16,8 +16,9 @@ module of :mod:`scenebot.dense.planes`, named in brackets):
    dropped (``drop_phantoms``): those seen through (more measured depth behind their extent
    than on it), those that lie behind another plane (a slice beneath the floor from a
    repeating carpet), and shadows: of two parallel planes a few centimetres apart
-   (``shadow_gap_m``), the one fewer views support (a circle of photos registered 0.2
-   degrees off puts its wall a few cm in front of itself). The ceiling, which a level
+   (``shadow_gap_m``), the one fewer views prefer (each view votes for the plane holding
+   more of its measured points; a circle of photos registered 0.2 degrees off puts its wall
+   a few cm in front of itself). The ceiling, which a level
    camera sees only in its photos' top rows, at grazing angles, is too small a share of the
    cloud for RANSAC: it is found as the highest dense height of the points with vertical
    normals, above every camera, with nothing measured above it (``ceiling_min_points``,
@@ -81,7 +82,12 @@ from scenebot.dense.planes.detect import LEVEL_DEG, detect_planes, detect_settin
 from scenebot.dense.planes.extents import carved_hulls, span_floor, span_to_ceiling, span_walls
 from scenebot.dense.planes.fill import fill_view, fill_view_settings
 from scenebot.dense.planes.geometry import Plane
-from scenebot.dense.planes.phantoms import plane_evidence, shadow_planes, validate_planes
+from scenebot.dense.planes.phantoms import (
+    plane_evidence,
+    shadow_planes,
+    validate_planes,
+    view_preferences,
+)
 from scenebot.dense.planes.store import PLANES_NPZ, save_planes
 from scenebot.dense.planes.vetoes import (
     occluded_fill,
@@ -138,13 +144,13 @@ def plane_fill(
     )
     planes, ceiling = _find_planes(cloud, cloud_n, centres, cfg)
     dropped: dict[int, str] = {}
-    support = None
+    support = prefer = None
     if cfg.drop_phantoms and planes:
-        planes, support, dropped = _drop_phantoms(planes, ceiling, views, measured, cfg)
+        planes, support, prefer, dropped = _drop_phantoms(planes, ceiling, views, measured, cfg)
     if cfg.extent == "carved_hull" and planes:
         _widen_extents(planes, ceiling, views, measured, centres, cfg)
     if cfg.drop_phantoms and cfg.shadow_gap_m > 0 and planes:
-        planes = _drop_shadows(planes, support, dropped, cfg)
+        planes = _drop_shadows(planes, support, prefer, dropped, cfg)
     LOG.info("dense: %d planes in %d voxel points", len(planes), len(cloud))
     save_planes(dense_dir / PLANES_NPZ, planes, ceiling, centres)
     t_planes = time.perf_counter() - t0
@@ -219,33 +225,38 @@ def _find_planes(
 
 def _evidence(
     planes: list[Plane], views: list, measured: _MeasuredMaps, cfg: PlaneFillConfig
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`~scenebot.dense.planes.phantoms.plane_evidence` summed over a sample of the
-    views (``on``, ``behind``, ``hidden``), and per plane the number of views that support
-    it (``support_min_points`` of their measured points on it)."""
+    views (``on``, ``behind``, ``hidden``), per plane the number of views that support it
+    (``support_min_points`` of their measured points on it), and per pair of planes the
+    views that prefer the one to the other
+    (:func:`~scenebot.dense.planes.phantoms.view_preferences`)."""
     on = np.zeros(len(planes), np.int64)
     behind = np.zeros(len(planes), np.int64)
     hidden = np.zeros((len(planes), len(planes)), np.int64)
     support = np.zeros(len(planes), np.int64)
+    prefer = np.zeros((len(planes), len(planes)), np.int64)
     step = max(1, len(views) // PHANTOM_SAMPLE_VIEWS)
     for k, (name, K, R, t, _) in enumerate(views):
         a, b, c = plane_evidence(measured(name)[0], K, R, t, planes,
                                  distance_m=cfg.label_distance_m,
                                  rel_distance=cfg.label_rel_distance)  # fmt: skip
         support += a >= cfg.support_min_points
+        prefer += view_preferences(a, cfg.support_min_points)
         if k % step == 0:
             on, behind, hidden = on + a, behind + b, hidden + c
-    return on, behind, hidden, support
+    return on, behind, hidden, support, prefer
 
 
 def _drop_phantoms(
     planes: list[Plane], ceiling: Plane | None, views: list, measured: _MeasuredMaps,
     cfg: PlaneFillConfig,
-) -> tuple[list[Plane], np.ndarray, dict[int, str]]:  # fmt: skip
+) -> tuple[list[Plane], np.ndarray, np.ndarray, dict[int, str]]:  # fmt: skip
     """The planes the views' measured depth does not contradict (seen through, hidden
-    behind another plane; the ceiling is never hidden), their support
-    (:func:`_evidence`) and why the others were dropped (by their index)."""
-    on, behind, hidden, support = _evidence(planes, views, measured, cfg)
+    behind another plane; the ceiling is never hidden), their support and the views'
+    preferences between them (:func:`_evidence`) and why the others were dropped (by their
+    index)."""
+    on, behind, hidden, support, prefer = _evidence(planes, views, measured, cfg)
     keep, dropped = validate_planes(
         planes, on, behind, hidden, cfg.max_seen_through, cfg.max_hidden,
         not_hidden=[j for j, p in enumerate(planes) if p is ceiling],
@@ -253,15 +264,17 @@ def _drop_phantoms(
     for j, why in dropped.items():
         _log_dropped(j, planes[j], why)
     dropped = {j: _dropped_note(planes[j], w) for j, w in dropped.items()}
-    return [planes[j] for j in keep], support[keep], dropped
+    return [planes[j] for j in keep], support[keep], prefer[np.ix_(keep, keep)], dropped
 
 
 def _drop_shadows(
-    planes: list[Plane], support: np.ndarray, dropped: dict[int, str], cfg: PlaneFillConfig
-) -> list[Plane]:
-    """The planes without the shadows of better supported ones; why those were dropped is
+    planes: list[Plane], support: np.ndarray, prefer: np.ndarray, dropped: dict[int, str],
+    cfg: PlaneFillConfig,
+) -> list[Plane]:  # fmt: skip
+    """The planes without the shadows of those the views prefer; why those were dropped is
     added to ``dropped`` (keys from 1000 on)."""
-    shadows = shadow_planes(planes, support, cfg.shadow_gap_m, max_angle_deg=cfg.merge_angle_deg)
+    shadows = shadow_planes(planes, support, cfg.shadow_gap_m, max_angle_deg=cfg.merge_angle_deg,
+                            prefer=prefer)  # fmt: skip
     for j, why in shadows.items():
         _log_dropped(j, planes[j], why)
         dropped[len(dropped) + 1000 + j] = _dropped_note(planes[j], why)

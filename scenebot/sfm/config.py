@@ -117,7 +117,13 @@ class SfmConfig(Settings):
         0.8,
         ge=0.0,
         le=1.0,
-        description="Fail with a clear message when fewer than this share of photos registers.",
+        description=(
+            "Fail with a clear message when fewer than this share of photos registers; in a "
+            "round after the first, only when the map also keeps less than this share of the "
+            "previous map's photos (else the round's photos did not join it: report.json "
+            "short_round, and the goals stage's stuck rule stops a campaign that keeps "
+            "failing so)."
+        ),
     )
     random_seed: int = Field(0, description="Seed for pycolmap's RANSAC and pair sampling.")
     mapping_attempts: int = Field(

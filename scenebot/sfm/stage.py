@@ -419,14 +419,16 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
 
     Raises:
         PhotoError: fewer than 3 photos, corrupt or truncated JPEGs (named).
-        SfmError: fewer than ``cfg.min_registered_share`` of the photos registered (named).
+        SfmError: fewer than ``cfg.min_registered_share`` of the photos registered (named),
+            in a later round only when the map lost the previous map's photos too
+            (:func:`_check_registered`).
     """
     t_start = time.perf_counter()
     s = _open_session(cfg, inputs, person)
     features, pairs = _features_and_pairs(s)
     s.fix_focal = _focal_fixed(cfg, s.photos)
     mres = _map(s)
-    _check_registered(cfg, mres, len(s.photos))
+    short_round = _check_registered(cfg, mres, len(s.photos), s.previous)
 
     mres, alignment, scale_checks = _align(s, mres)
     person_check: dict = {}
@@ -460,6 +462,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
     report = _report(s, rec, mres, features, pairs, circle_stats, scale, alignment, acc)
     report["global_refinement"] = checks
     report["placed"] = placed
+    report["short_round"] = short_round
     if s.person:
         report["person_check"] = person_check
     outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
@@ -624,21 +627,54 @@ def _refine_globally_if_needed(
     return checks, alignment
 
 
-def _check_registered(cfg: SfmConfig, mres: MappingResult, n_photos: int) -> None:
+def _check_registered(
+    cfg: SfmConfig,
+    mres: MappingResult,
+    n_photos: int,
+    previous: pycolmap.Reconstruction | None = None,
+) -> dict | None:
     """SfmError naming the dropped photos when fewer than ``cfg.min_registered_share`` of
     the ``n_photos`` photos (or fewer than 3) registered (the fast path's photos taken out
     against the robot's estimate count as registered, as on the slow path, whose model
-    holds them until the stage leaves them out: ``mres.overruled``)."""
-    n_reg = mres.reconstruction.num_reg_images()
-    if n_reg + mres.overruled < cfg.min_registered_share * n_photos or n_reg < 3:
-        listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
-        raise SfmError(
-            f"only {n_reg} of {n_photos} photos registered (sfm.min_registered_share = "
-            f"{cfg.min_registered_share}; best of {max(mres.attempts, 1)} run(s), "
-            f"sfm.mapping_attempts). Dropped photos:\n  {listing}\n"
-            "Photos need overlap (neighbouring views sharing >= 1/3 of the scene) and "
-            "texture; add photos between the dropped ones or lower sfm.min_registered_share."
-        )
+    holds them until the stage leaves them out: ``mres.overruled``).
+
+    A round after the first (``previous``, round r-1's map) whose map still holds at least
+    that share of the previous map's photos is not a broken map but a round whose new photos
+    did not join it (repeating texture, a view the map never saw): the stage goes on with the
+    map as it is and says so, and the goals stage's stuck rule (``goals.patience`` rounds that
+    add no photo) stops a campaign that keeps failing so. Returns that case's figures
+    (report.json ``short_round``), else None.
+    """
+    rec = mres.reconstruction
+    n_reg = rec.num_reg_images()
+    if n_reg + mres.overruled >= cfg.min_registered_share * n_photos and n_reg >= 3:
+        return None
+    listing = "\n  ".join(f"{n}: {why}" for n, why in list(mres.dropped.items())[:40])
+    if previous is not None and n_reg >= 3:
+        before = {previous.image(i).name for i in previous.reg_image_ids()}
+        now = {rec.image(i).name for i in rec.reg_image_ids()}
+        kept = len(before & now)
+        if before and kept >= cfg.min_registered_share * len(before):
+            short = {"photos": n_photos, "registered": n_reg, "overruled": mres.overruled,
+                     "previous_map": len(before), "previous_kept": kept,
+                     "joined": len(now - before),
+                     "min_registered_share": cfg.min_registered_share}  # fmt: skip
+            log.warning(
+                "only %d of %d photos registered (sfm.min_registered_share = %g), but the map "
+                "keeps %d of the previous map's %d photos: this round's photos did not join it "
+                "(%d new photos in the map); going on with the map, the campaign stops as "
+                "stuck after goals.patience such rounds. Dropped photos:\n  %s",
+                n_reg, n_photos, cfg.min_registered_share, kept, len(before),
+                short["joined"], listing,
+            )  # fmt: skip
+            return short
+    raise SfmError(
+        f"only {n_reg} of {n_photos} photos registered (sfm.min_registered_share = "
+        f"{cfg.min_registered_share}; best of {max(mres.attempts, 1)} run(s), "
+        f"sfm.mapping_attempts). Dropped photos:\n  {listing}\n"
+        "Photos need overlap (neighbouring views sharing >= 1/3 of the scene) and "
+        "texture; add photos between the dropped ones or lower sfm.min_registered_share."
+    )
 
 
 def _align_settings(cfg: SfmConfig, previous: pycolmap.Reconstruction | None) -> dict:

@@ -4,8 +4,9 @@ contradicts are dropped (``drop_phantoms``).
 Those seen through (more measured depth behind their extent than on it), those that lie
 behind another plane (a slice beneath the floor from a repeating carpet)
 (:func:`plane_evidence`, :func:`validate_planes`), and shadows: of two parallel planes a
-few centimetres apart (``shadow_gap_m``), the one fewer views support (a circle of photos
-registered 0.2 degrees off puts its wall a few cm in front of itself; :func:`shadow_planes`).
+few centimetres apart (``shadow_gap_m``), the one fewer views prefer, each view voting for
+the plane that holds more of its measured points (a circle of photos registered 0.2 degrees
+off puts its wall a few cm in front of itself; :func:`shadow_planes`).
 """
 
 from __future__ import annotations
@@ -82,15 +83,19 @@ def validate_planes(
 
 def shadow_planes(
     planes: list[Plane], support: np.ndarray, max_gap_m: float, *, max_angle_deg: float,
-    min_overlap: float = 0.3,
+    min_overlap: float = 0.3, prefer: np.ndarray | None = None,
 ) -> dict[int, str]:  # fmt: skip
-    """Planes that shadow a plane seen by more views, a few centimetres beside it.
+    """Planes that shadow a plane the views' measured depth prefers, a few centimetres
+    beside it.
 
     A handful of views whose poses are slightly off (a turn-in-place circle registered with a
     0.2 degree error between its photos) put the wall they see a few centimetres in front of
     where every other view puts it, and RANSAC finds that shadow as a plane of its own,
-    parallel to the wall and as large in points. The wall is the one more views support
-    (of two that as many views support, the one with more points).
+    parallel to the wall and as large in points. The wall is the one the views prefer: with
+    ``prefer``, of two such planes the one more views hold more of their measured points on
+    (a view's vote between the two; a tilted plane crossing the wall is near it for most
+    views, and as many views support both, but each view's points lie on the wall); without
+    it, the one more views support (``support``). A tie goes to the one with more points.
 
     Args:
         planes: the planes, with their extents.
@@ -98,6 +103,8 @@ def shadow_planes(
         max_gap_m: parallel planes closer than this are one surface seen twice.
         max_angle_deg: planes within this angle are parallel.
         min_overlap: share of the weaker plane's cells inside the stronger one's extent.
+        prefer: (P, P) views that hold more of their measured points on plane i than on
+            plane j (:func:`view_preferences`), or None.
 
     Returns:
         {index: reason} of the shadow planes.
@@ -105,23 +112,50 @@ def shadow_planes(
     why: dict[int, str] = {}
     cos_par = np.cos(np.radians(max_angle_deg))
     order = sorted(range(len(planes)), key=lambda j: (-support[j], -planes[j].inliers))
-    for a, i in enumerate(order):
-        if i in why:
-            continue
-        pi = planes[i]
-        for j in order[a + 1 :]:
-            pj = planes[j]
-            weaker = support[j] < support[i] or (
-                support[j] == support[i] and pj.inliers < pi.inliers
-            )  # as many views on both: the one with more points is the surface
-            if j in why or not weaker or abs(pi.normal @ pj.normal) < cos_par:
+
+    def votes(i: int, j: int) -> tuple[int, int]:
+        if prefer is None:
+            return int(support[i]), int(support[j])
+        return int(prefer[i, j]), int(prefer[j, i])
+
+    for a, first in enumerate(order):
+        for second in order[a + 1 :]:
+            if first in why:
+                break
+            if second in why or abs(planes[first].normal @ planes[second].normal) < cos_par:
                 continue
-            gap = abs(pj.origin @ pi.normal + pi.offset)
+            v1, v2 = votes(first, second)
+            if v1 != v2:
+                keep, drop = (first, second) if v1 > v2 else (second, first)
+            elif planes[first].inliers != planes[second].inliers:  # as many views for both:
+                # the one with more points is the surface
+                keep, drop = ((first, second) if planes[second].inliers < planes[first].inliers
+                              else (second, first))  # fmt: skip
+            else:
+                continue
+            pk, pd = planes[keep], planes[drop]
+            gap = abs(pd.origin @ pk.normal + pk.offset)
             if gap > max_gap_m:
                 continue
-            _, X = pj.cell_centres()
-            overlap = float(pi.inside(X).mean()) if len(X) else 0.0
+            _, X = pd.cell_centres()
+            overlap = float(pk.inside(X).mean()) if len(X) else 0.0
             if overlap >= min_overlap:
-                why[j] = (f"shadow of a plane {100 * gap:.1f} cm away ({100 * overlap:.0f}% "
-                          f"overlap), seen by {support[j]} views against {support[i]}")  # fmt: skip
+                vk, vd = votes(keep, drop)
+                said = (f"{vd} views hold more of their points on it, {vk} on the other; "
+                        if prefer is not None else "")  # fmt: skip
+                why[drop] = (f"shadow of a plane {100 * gap:.1f} cm away ({100 * overlap:.0f}% "
+                             f"overlap): {said}seen by {support[drop]} views against "
+                             f"{support[keep]}")  # fmt: skip
     return why
+
+
+def view_preferences(on: np.ndarray, min_points: int) -> np.ndarray:
+    """One view's votes between the planes: (P, P) bool, plane i over plane j where the view
+    holds more of its measured points on i than on j, and at least ``min_points`` on i.
+
+    Args:
+        on: (P,) the view's measured points on each plane (:func:`plane_evidence`).
+        min_points: the points that make a view support a plane.
+    """
+    on = np.asarray(on)
+    return (on[:, None] > on[None, :]) & (on[:, None] >= min_points)
