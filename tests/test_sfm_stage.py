@@ -403,6 +403,24 @@ def test_fixes_away_from_the_map_make_the_global_refinement_run(round0, round1, 
     assert len(new) == 24 and max(new.values()) < 0.02
 
 
+def _round1_scene(round0, round1, tmp_path):
+    """Round 0's map and database and round 1's capture in a scene folder of their own:
+    (the scene folder, round 1's capture folder)."""
+    base = round0[0]
+    scene = tmp_path / "scene"
+    shutil.copytree(base / "round_000", scene / "round_000")
+    shutil.copytree(base / "sfm_db", scene / "sfm_db")
+    cap1 = scene / "round_001" / "capture"
+    shutil.copytree(round1[0], cap1)
+    return scene, cap1
+
+
+def _noise_photo(rng) -> np.ndarray:
+    """A 320x240 photo of something else: random 8x8-pixel blocks (many SIFT features)."""
+    noise = rng.integers(0, 256, (240 // 8, 320 // 8, 3)).astype(np.uint8)
+    return np.kron(noise, np.ones((8, 8, 1), np.uint8))
+
+
 def test_photos_that_match_no_map_point_leave_the_fast_path_on_it(round0, round1, tmp_path):
     """Ten photos of something else (noise, a view the map never saw) join round 1's 24:
     24 of 34 register (< sfm.min_registered_share), but the ten match fewer map points than
@@ -410,21 +428,14 @@ def test_photos_that_match_no_map_point_leave_the_fast_path_on_it(round0, round1
     instead of running the incremental mapper again (the flat: it added no photo)."""
     from scenebot.capturelog import read_log
 
-    base = round0[0]
-    scene = tmp_path / "scene"
-    shutil.copytree(base / "round_000", scene / "round_000")
-    shutil.copytree(base / "sfm_db", scene / "sfm_db")
-    cap1 = scene / "round_001" / "capture"
-    shutil.copytree(round1[0], cap1)
+    scene, cap1 = _round1_scene(round0, round1, tmp_path)
     records = list(read_log(cap1 / "log.jsonl"))
     photo = next(r for r in records if r.get("type") == "photo")
     rng = np.random.default_rng(5)
     extra = []
     for k in range(10):
         name = f"images/r001_9{k:03d}.jpg"
-        noise = rng.integers(0, 256, (240 // 8, 320 // 8, 3)).astype(np.uint8)
-        img = np.kron(noise, np.ones((8, 8, 1), np.uint8))  # blocks: many SIFT features
-        write_jpeg_with_exif(cap1 / name, img, photo_focal(cap1 / photo["image"]))
+        write_jpeg_with_exif(cap1 / name, _noise_photo(rng), photo_focal(cap1 / photo["image"]))
         extra.append({"type": "photo", "index": 100 + k, "image": name, "t": 500.0 + k})
     end = [r for r in records if r.get("type") == "end"]
     body = [r for r in records if r.get("type") != "end"]
@@ -445,20 +456,14 @@ def test_a_round_whose_photos_do_not_join_keeps_the_map_and_says_so(round0, roun
     rule stops a campaign that keeps failing so) instead of stopping the workflow."""
     from scenebot.capturelog import read_log
 
-    base = round0[0]
-    scene = tmp_path / "scene"
-    shutil.copytree(base / "round_000", scene / "round_000")
-    shutil.copytree(base / "sfm_db", scene / "sfm_db")
-    cap1 = scene / "round_001" / "capture"
-    shutil.copytree(round1[0], cap1)
+    scene, cap1 = _round1_scene(round0, round1, tmp_path)
     rng = np.random.default_rng(7)
     photos = [r for r in read_log(cap1 / "log.jsonl") if r.get("type") == "photo"]
     focal = photo_focal(cap1 / photos[0]["image"])
     for r in photos:  # new files under new names: the database holds the old ones' features
-        noise = rng.integers(0, 256, (240 // 8, 320 // 8, 3)).astype(np.uint8)
         (cap1 / r["image"]).unlink()
         r["image"] = r["image"].replace(".jpg", "_x.jpg")
-        write_jpeg_with_exif(cap1 / r["image"], np.kron(noise, np.ones((8, 8, 1), np.uint8)), focal)
+        write_jpeg_with_exif(cap1 / r["image"], _noise_photo(rng), focal)
     records = [r for r in read_log(cap1 / "log.jsonl") if r.get("type") != "photo"]
     body = [r for r in records if r.get("type") != "end"] + photos
     body += [r for r in records if r.get("type") == "end"]
