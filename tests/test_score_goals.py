@@ -2,6 +2,7 @@
 
 import json
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from scenebot.artifacts.candidates import read_candidates
 from scenebot.artifacts.freespace import FreeSpace, point_segment_distance
 from scenebot.artifacts.mesh import read_mesh
 from scenebot.goals.config import GoalsConfig
+from scenebot.goals.failures import is_idle, round_photos
 from scenebot.goals.select import goals_document, heading_difference, select_goals
 from scenebot.goals.stage import GoalsInputs, GoalsOutputs
 from scenebot.goals.stage import run as run_goals
@@ -362,6 +364,69 @@ def test_a_campaign_whose_rounds_add_no_photo_stops_as_stuck(
     # a round that added photos resets the count
     doc = _goals_after(scored_room, {"map_images": 60, "idle": {"rounds": 5}}, prev, log)
     assert doc["idle"]["rounds"] == 0 and not doc.get("stuck")
+
+
+@pytest.mark.parametrize(
+    ("joined", "taken", "idle"),
+    [(0, None, True), (3, None, False), (-2, None, True), (6, 25, True), (12, 25, True),
+     (13, 25, False), (0, 0, True), (30, 25, False)],
+)  # fmt: skip
+def test_a_round_is_idle_when_most_of_its_new_photos_missed_the_map(joined, taken, idle):
+    """Fewer than half the round's new photos in the map: idle; without the photo count,
+    only a round that added none."""
+    assert is_idle(joined, taken) is idle
+
+
+def test_the_round_photos_come_from_the_previous_goals_and_the_sfm_report():
+    prev = {"map_images": 121, "map_photos": 125}
+    assert round_photos(127, 150, prev) == (6, 25)
+    assert round_photos(127, None, prev) == (6, None)
+    assert round_photos(127, 150, {"map_images": 121}) == (6, None)  # an older goals.json
+    assert round_photos(None, 150, prev) is None and round_photos(127, 150, {}) is None
+
+
+@pytest.mark.parametrize(
+    ("previous_images", "idle_before", "complete", "stuck"),
+    [(66, 0, False, False), (66, 1, True, True), (59, 0, True, False)],
+)  # fmt: skip
+def test_a_round_whose_photos_mostly_missed_the_map_is_idle_not_complete(
+    scored_room, tmp_path, previous_images, idle_before, complete, stuck
+):
+    """A round that took 25 new photos (the sfm report's photos, 75 -> 100) of which the map
+    grew by 6 (66 -> 72): its low score gain is no diminishing returns (the previous round
+    was low already, so it would end the campaign), it is idle, and after an idle round it
+    makes the campaign stuck, the reason listing each idle round's photos. With 13 of the 25
+    in the map (59 -> 72) the round counts and the campaign is complete."""
+    mean, area = scored_room["doc"]["mean_score_deg"], scored_room["doc"]["free_area_m2"]
+    sfm = tmp_path / "round_001" / "sfm"
+    shutil.copytree(scored_room["root"] / "sfm", sfm)
+    (sfm / "report.json").write_text(json.dumps({"photos": 100, "registered": 72}))
+    prev = tmp_path / "round_000" / "goals.json"
+    prev.parent.mkdir()
+    prev_doc = {"mean_score_deg": 1.01 * mean, "free_area_m2": area, "map_photos": 75,
+                "map_images": previous_images, "score_gain": {"low_rounds": 1},
+                "idle": {"rounds": idle_before, "history": [[3, 25]]}}  # fmt: skip
+    prev.write_text(json.dumps(prev_doc))
+    doc = run_goals(
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=2),
+        GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz, sfm, prev),
+        GoalsOutputs(tmp_path / "round_001" / "goals.json"),
+    )
+    assert doc["map_images"] == 72 and doc["map_photos"] == 100
+    assert doc["complete"] is complete and doc.get("stuck", False) is stuck
+    idle = doc["idle"]
+    assert idle["joined"] == 72 - previous_images and idle["new_photos"] == 25
+    if previous_images == 59:
+        assert "diminishing returns" in doc["complete_because"] and idle["rounds"] == 0
+        return
+    assert "6 of its 25 new photos" in doc["score_gain"]["not_applied"]
+    assert idle["rounds"] == idle_before + 1
+    if stuck:
+        assert idle["history"] == [[3, 25], [6, 25]]
+        assert doc["complete_because"].startswith(
+            "stuck: 2 rounds in a row added to the map fewer than half their new photos "
+            "(3 of 25, 6 of 25) (66 -> 72 registered"
+        )
 
 
 def _raster(x0, y0, x1, y1, origin=(-3.0, -3.0), res=0.05, shape=(140, 160), extra=()):

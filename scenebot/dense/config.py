@@ -34,6 +34,13 @@ class PatchMatchConfig(Settings):
         description="At full resolution evaluate only each pixel's top_k sources chosen for the "
         "upsampled hypothesis (halves the work with top_k=2 of 4 sources).",
     )
+    view_selection_levels: int = Field(
+        1,
+        ge=1,
+        le=6,
+        description="With fine_view_selection: the finest this many pyramid levels evaluate "
+        "each pixel's selected sources only (1: full resolution alone).",
+    )
     geom_iterations: int = Field(
         1, ge=0, le=10, description="Geometric-consistency iterations at full resolution."
     )

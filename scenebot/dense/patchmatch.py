@@ -929,7 +929,7 @@ class PatchMatchSolver:
             # perturbation size: large on the coarsest level, small once upsampled
             scale0 = 0.25 * 0.4 ** (levels - 1 - lev) if not geometric else 0.01
             rnd = (not geometric) and lev > 0
-            use_sel = geometric or (lev == 0 and cfg.fine_view_selection)
+            use_sel = geometric or (lev < cfg.view_selection_levels and cfg.fine_view_selection)
             self._iterate(L, maps, iters, geometric, (dmin, dmax), scale0, rnd, nb, use_sel)
             depth_np, normal_np, cost_np, photo_np = (_to_numpy(m) for m in maps[:4])
         return DepthResult(depth_np, normal_np, cost_np, photo_np)

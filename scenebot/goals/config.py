@@ -70,8 +70,8 @@ class GoalsConfig(Settings):
         ge=1,
         description="Diminishing returns must hold in this many consecutive rounds: one "
         "round's gain varies from campaign to campaign (the same office: 12% in one, 22% in "
-        "another), so a single low round does not end the campaign. Also the rounds in a "
-        "row that may add no photo to the map before the campaign stops as stuck "
+        "another), so a single low round does not end the campaign. Also the idle rounds in "
+        "a row (most of their new photos not in the map) before the campaign stops as stuck "
         "(scenebot.goals.failures).",
     )
     new_area_margin_m: float = Field(

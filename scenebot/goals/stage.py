@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,13 +92,15 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
     scored = any_valid & np.isfinite(cols["score_deg"])
     mean_score = float(np.mean(cols["score_deg"][scored])) if scored.any() else None
     map_images = _registered_images(inputs.sfm_dir)
+    map_photos = _map_photos(inputs.sfm_dir)
     new_area = None
     prev_fs = inputs.previous_freespace_npz
     if prev_fs is not None and Path(prev_fs).is_file():
         new_area = fs.new_area_m2(FreeSpace.load(prev_fs), cfg.new_area_margin_m)
     returns = diminishing_returns(mean_score, fs.area_m2, inputs.previous_goals_json,
                                   cfg.min_score_gain, cfg.min_area_gain, map_images,
-                                  new_area, patience=cfg.patience)  # fmt: skip
+                                  new_area, patience=cfg.patience,
+                                  map_photos=map_photos)  # fmt: skip
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     doc = goals_document(
         poses,
@@ -117,13 +120,14 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
             "mean_score_deg": None if mean_score is None else round(mean_score, 4),
             "free_area_m2": round(fs.area_m2, 4),
             "map_images": map_images,
+            "map_photos": map_photos,
             "score_gain": returns,
             "avoided": avoided,
         },
     )
     apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
     _apply_stuck(doc, idle_rounds(map_images, inputs.previous_goals_json, abandoned,
-                                  cfg.patience))  # fmt: skip
+                                  cfg.patience, map_photos))  # fmt: skip
     if doc["complete"]:
         log.info("%s: exploration complete: %s", where, doc["complete_because"])
     # next in rank, for the planner to use in place of a goal it cannot route to
@@ -173,6 +177,17 @@ def _registered_images(sfm_dir: Path | None) -> int | None:
     return int(pycolmap.Reconstruction(str(sfm_dir)).num_reg_images())
 
 
+def _map_photos(sfm_dir: Path | None) -> int | None:
+    """The photos the round's sfm stage saw, every round's so far (its ``report.json``
+    ``photos``, registered or not), None without it: with the previous round's, the round's
+    new photos (an idle round: :func:`scenebot.goals.failures.is_idle`)."""
+    report = None if sfm_dir is None else Path(sfm_dir) / "report.json"
+    if report is None or not report.is_file():
+        return None
+    photos = json.loads(report.read_text(encoding="utf-8")).get("photos")
+    return int(photos) if isinstance(photos, int) else None
+
+
 def _best(score: np.ndarray) -> float | None:
     finite = np.isfinite(score)
     return round(float(np.max(score[finite])), 4) if finite.any() else None
@@ -216,12 +231,13 @@ def _frontier_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs
         "pose_convention": "camera centre x, y (m, map frame) and heading theta (rad, ccw from x)",
         "seen_free_fraction": float(seen.sum() / max(fs.mask.sum(), 1)),
         "map_images": len(centres),
+        "map_photos": _map_photos(inputs.sfm_dir),
         "goals": [_goal_record(r, g) for r, g in enumerate(goals)],
     }
     if doc["complete"]:
         doc["complete_because"] = "no frontier left"
     _apply_stuck(doc, idle_rounds(len(centres), inputs.previous_goals_json, abandoned,
-                                  cfg.patience))  # fmt: skip
+                                  cfg.patience, doc["map_photos"]))  # fmt: skip
     write_goals(outputs.goals_json, doc)
     if outputs.goals_png is not None:
         from scenebot.goals.plots import plot_frontier
@@ -251,8 +267,8 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     In a guided campaign (``robot: guided``, ``person-sim``: a previous round's goals.json)
     the stopping rule is the robot's: diminishing returns of the mean view score and the free
     volume (``goals.min_score_gain``, ``min_area_gain`` of the volume, ``patience``), and a
-    campaign whose rounds add no photo to the map stops as stuck. A folder of photos is one
-    round, so neither applies there.
+    campaign whose rounds are idle (most new photos not in the map) stops as stuck. A folder of
+    photos is one round, so neither applies there.
     """
     from scenebot.artifacts.freespace import FreeVolume
     from scenebot.goals.select import select_goals_3d
@@ -300,17 +316,19 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
             "free_voxels": vol.n_free,
             "camera_height": round(vol.camera_height, 4),
             "map_images": None if smap is None else len(smap.names),
+            "map_photos": _map_photos(inputs.sfm_dir),
             "coverage": None if coverage is None else coverage[2],
         },
     )  # fmt: skip
     returns = diminishing_returns(
         doc["mean_score_deg"], vol.volume_m3, inputs.previous_goals_json, cfg.min_score_gain,
         cfg.min_area_gain, doc["map_images"], patience=cfg.patience, size_key="free_volume_m3",
+        map_photos=doc["map_photos"],
     )  # fmt: skip
     doc["score_gain"] = returns
     apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
     _apply_stuck(doc, idle_rounds(doc["map_images"], inputs.previous_goals_json, [],
-                                  cfg.patience))  # fmt: skip
+                                  cfg.patience, doc["map_photos"]))  # fmt: skip
     degenerate = vol.degenerate()
     if degenerate is not None or not valid.any():
         doc["complete"] = False

@@ -8,12 +8,13 @@ A round's map is **complete**, and the campaign takes no more rounds, when eithe
 2. **Diminishing returns** (:func:`diminishing_returns`): for ``goals.patience`` rounds in a
    row, the round's photos moved the mean view score by less than ``goals.min_score_gain``
    (a fraction) *and* added less new free space (farther than ``goals.new_area_margin_m``
-   from the previous round's) than ``goals.min_area_gain`` of the previous free area. A
-   round that added no photo to the map measured nothing and does not count.
+   from the previous round's) than ``goals.min_area_gain`` of the previous free area. An
+   idle round (most of its new photos did not join the map) measured too little and does
+   not count.
 
 With ``goals.method: frontier`` (the baseline) the map is complete when no frontier is left.
-Either way a campaign whose last ``goals.patience`` rounds added no photo to the map stops as
-*stuck*, saying why (:mod:`scenebot.goals.failures`).
+Either way a campaign whose last ``goals.patience`` rounds were idle stops as *stuck*, saying
+why (:mod:`scenebot.goals.failures`).
 Whatever the rule says, the campaign stops after ``max_rounds`` rounds (``campaign.json``
 says which of these stopped it).
 """
@@ -22,6 +23,8 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+
+from scenebot.goals.failures import is_idle, round_photos
 
 
 def diminishing_returns(
@@ -35,6 +38,7 @@ def diminishing_returns(
     *,
     patience: int,
     size_key: str = "free_area_m2",
+    map_photos: int | None = None,
 ) -> dict | None:
     """What the last round bought, and whether that is too little to go on.
 
@@ -54,9 +58,11 @@ def diminishing_returns(
     ``patience`` consecutive rounds (``low_rounds`` counts them; the previous round's count
     comes from its ``goals.json``).
 
-    A round that added no photo to the map (``map_images``, the registered images, no more
-    than the previous round's: its goals were not reached) measured nothing, so it cannot
-    show diminishing returns: the test is not applied, and the next round tries again.
+    An idle round (:func:`scenebot.goals.failures.is_idle`: most of its new photos did not
+    join the map, from ``map_images``, the registered images, and ``map_photos``, the photos
+    the sfm stage saw; without the photo counts, a round that added no photo) measured too
+    little to show diminishing returns: the test is not applied, and the next round tries
+    again (rounds like it make the campaign stuck instead).
     """
     if mean_score is None or previous_goals_json is None or not previous_goals_json.is_file():
         return None
@@ -75,15 +81,22 @@ def diminishing_returns(
            "new_area_m2": None if new_area_m2 is None else round(new_area_m2, 4),
            "new_area_gain": None if new_gain is None else round(new_gain, 4)}  # fmt: skip
     prev_low = int((prev_doc.get("score_gain") or {}).get("low_rounds", 0))
-    prev_images = prev_doc.get("map_images")
-    no_photo = map_images is not None and prev_images is not None and map_images <= prev_images
-    if map_images is not None and prev_images is not None:
-        out["map_images"], out["previous_map_images"] = map_images, prev_images
-    if no_photo:
+    added = round_photos(map_images, map_photos, prev_doc)
+    no_photo = added is not None and is_idle(*added)
+    if added is not None:
+        out["map_images"], out["previous_map_images"] = map_images, map_images - added[0]
+    if no_photo and (added[1] is None or added[0] <= 0):
         out["not_applied"] = (
-            f"the last round added no photo to the map ({prev_images} -> {map_images} "
-            "registered images: its goals were not reached), so no change in the score "
-            "says nothing about what more photos would bring"
+            f"the last round added no photo to the map ({map_images - added[0]} -> "
+            f"{map_images} registered images: its goals were not reached), so no change in "
+            "the score says nothing about what more photos would bring"
+        )
+    elif no_photo:
+        out["not_applied"] = (
+            f"the last round added {added[0]} of its {added[1]} new photos to the map "
+            f"({map_images - added[0]} -> {map_images} registered images; the others did not "
+            "register or were left out), so its change in the score says little about what "
+            "more photos would bring"
         )
     out["low"] = bool(not no_photo and min_gain > 0 and abs(gain) < min_gain
                       and grew < min_area_gain)  # fmt: skip
