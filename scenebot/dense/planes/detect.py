@@ -274,16 +274,76 @@ def detect_planes(
         max_planes=max_planes, merge_angle_deg=merge_angle_deg, normal_deg=normal_deg,
     )  # fmt: skip
     up = _up_direction(found, fits, np.cos(np.radians(LEVEL_DEG))) if snap_deg else None
-    planes: list[Plane] = []
+    fitted = []
     for sets, (n, d) in zip(found, fits, strict=True):
         inl = np.concatenate(sets)
         if up is not None:
             n, d = _snap_plane(n, d, inl, up, snap_deg)
+        d = _recentre(n, d, points, normals, np.cos(np.radians(normal_deg)), distance_m)
+        fitted.append((n, d, inl))
+    planes: list[Plane] = []
+    for n, d, inl in _merge_recentred(fitted, np.cos(np.radians(merge_angle_deg)), distance_m):
         plane = _with_extent(n, d, inl, cell_m, min_cell_points, close_cells)
         if plane is not None:
             planes.append(plane)
     planes.sort(key=lambda p: -p.inliers)
     return planes
+
+
+#: :func:`_recentre`'s window, in RANSAC distances either side of the plane: the span within
+#: which :func:`_peel_planes` merges a plane into an earlier one
+RECENTRE_BAND = 2.0
+
+
+def _recentre(
+    n: np.ndarray, d: float, points: np.ndarray, normals: np.ndarray | None, cos_normal: float,
+    distance_m: float, iterations: int = 10,
+) -> float:  # fmt: skip
+    """The offset of the plane (n, d) moved to the centre of its surface's points: the
+    median signed distance of the points (whose normals agree, with ``normals``) within
+    :data:`RECENTRE_BAND` RANSAC distances of it, the window moved with it until it rests
+    (a surface farther away than that stays a plane of its own).
+
+    Measured depth spreads a plain wall's points over several RANSAC distances (its
+    stereo noise grows with the distance; at 3 m a few centimetres either way), and the
+    slab RANSAC keeps (``distance_m`` either side) may lie anywhere in that spread: an office
+    wall was found 2 cm off, its other half 4 cm away as a second plane (too far to merge),
+    and the views' vote kept the wrong one. The median over a window two slabs wide walks
+    to the middle of the spread (the voxel grid's rows, a voxel apart, even out in it), and
+    both halves of one wall arrive at the same offset (:func:`_merge_recentred`)."""
+    proj = np.asarray(points, np.float64) @ n
+    if normals is not None:
+        proj = proj[np.abs(np.asarray(normals) @ n) > cos_normal]
+    band = RECENTRE_BAND * distance_m
+    for _ in range(iterations):
+        near = np.abs(proj + d) < band
+        if near.sum() < 3:
+            break
+        moved = -float(np.median(proj[near]))
+        if abs(moved - d) < 1e-4 * distance_m:
+            return moved
+        d = moved
+    return d
+
+
+def _merge_recentred(
+    fitted: list[tuple[np.ndarray, float, np.ndarray]], cos_merge: float, distance_m: float
+) -> list[tuple[np.ndarray, float, np.ndarray]]:
+    """The recentred planes (normal, offset, inliers), those parallel within the merge
+    angle whose offsets now lie within ``distance_m`` of each other merged into the larger
+    one (the inliers of both, the larger's normal and offset)."""
+    order = sorted(range(len(fitted)), key=lambda k: -len(fitted[k][2]))
+    out: list[list] = []
+    for k in order:
+        n, d, inl = fitted[k]
+        for m in out:
+            s = float(n @ m[0])
+            if abs(s) > cos_merge and abs(d * np.sign(s) - m[1]) < distance_m:
+                m[2] = np.concatenate([m[2], inl])
+                break
+        else:
+            out.append([n, d, inl])
+    return [(n, d, inl) for n, d, inl in out]
 
 
 def detect_settings(cfg: PlaneFillConfig) -> dict:
