@@ -28,7 +28,6 @@ of the campaign is written to: it is hard-linked into ``--work``/``<variant>`` w
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import resource
@@ -40,23 +39,14 @@ from pathlib import Path
 
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
-from bench_plane_fill import _value  # benchmarks/ is the script's folder: on sys.path
+from bench_plane_fill import (  # benchmarks/ is the script's folder: on sys.path
+    _value,
+    campaign_config,
+    link_scene,
+    variant_parser,
+)
 
-from scenebot.config import read_config_file, section_json, validate_config
-
-
-def link_scene(src: Path, dst: Path) -> None:
-    """``dst``: hard links of the campaign ``src`` without its ``final/`` folder."""
-    if dst.exists():
-        shutil.rmtree(dst)
-    dst.mkdir(parents=True)
-    for item in src.iterdir():
-        if item.name == "final":
-            continue
-        if item.is_dir():
-            shutil.copytree(item, dst / item.name, copy_function=os.link)
-        else:
-            os.link(item, dst / item.name)
+from scenebot.config import section_json, validate_config
 
 
 def run_stage(doc: dict, scene_dir: Path, last_round: int) -> dict:
@@ -129,19 +119,10 @@ def set_key(section: dict, dotted: str, value) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--campaign", type=Path, required=True, help="results/{scene} of a campaign")
-    ap.add_argument("--config", type=Path, default=Path("config.yaml"))
-    ap.add_argument("--variant", action="append", default=[], help="name[:key=value;...]")
-    ap.add_argument("--work", type=Path, default=Path("/tmp/bench_dense_stage"))
+    ap = variant_parser(__doc__.split("\n\n")[0], "/tmp/bench_dense_stage", ";")
     ap.add_argument("--json", type=Path, help="write the rows here too")
     args = ap.parse_args()
-    campaign = json.loads((args.campaign / "campaign.json").read_text())
-    last_round = max(r["round"] for r in campaign["rounds"])
-    first_log = args.campaign / "round_000" / "capture" / "log.jsonl"
-    session = json.loads(first_log.read_text().splitlines()[0])
-    doc = read_config_file(args.config) | {k: session["config"][k] for k in ("world", "sim")}
-    doc["scene"] = args.campaign.name
+    doc, last_round = campaign_config(args.campaign, args.config)
     rows = []
     for spec in args.variant or ["default"]:
         name, _, kv = spec.partition(":")

@@ -41,10 +41,8 @@ from scenebot.config import read_config_file, section_json, validate_config
 MEASURED = ("depth_maps_measured", "normal_maps_measured")
 
 
-def link_campaign(src: Path, dst: Path) -> Path:
-    """``dst``: hard links of the campaign ``src`` without its final products, and a dense
-    workspace holding links of the measured maps (the fill writes its maps anew). Returns
-    the new dense folder."""
+def link_scene(src: Path, dst: Path) -> None:
+    """``dst``: hard links of the campaign ``src`` without its ``final/`` folder."""
     if dst.exists():
         shutil.rmtree(dst)
     dst.mkdir(parents=True)
@@ -55,6 +53,13 @@ def link_campaign(src: Path, dst: Path) -> Path:
             shutil.copytree(item, dst / item.name, copy_function=os.link)
         else:
             os.link(item, dst / item.name)
+
+
+def link_campaign(src: Path, dst: Path) -> Path:
+    """``dst``: hard links of the campaign ``src`` without its final products, and a dense
+    workspace holding links of the measured maps (the fill writes its maps anew). Returns
+    the new dense folder."""
+    link_scene(src, dst)
     dense, src_dense = dst / "final" / "dense", src / "final" / "dense"
     for name in ("sparse", "images"):
         shutil.copytree(src_dense / name, dense / name, copy_function=os.link)
@@ -122,19 +127,34 @@ def _value(text: str):
         return text
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def variant_parser(description: str, work: str, separator: str) -> argparse.ArgumentParser:
+    """The command line of a script that re-runs a stage on a finished campaign, variant
+    against variant (``--campaign``, ``--config``, ``--variant``, ``--work``)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--campaign", type=Path, required=True, help="results/{scene} of a campaign")
     ap.add_argument("--config", type=Path, default=Path("config.yaml"))
-    ap.add_argument("--variant", action="append", default=[], help="name[:key=value,...]")
-    ap.add_argument("--work", type=Path, default=Path("/tmp/bench_plane_fill"))
-    args = ap.parse_args()
-    campaign = json.loads((args.campaign / "campaign.json").read_text())
-    round_index = max(r["round"] for r in campaign["rounds"])
-    first_log = args.campaign / "round_000" / "capture" / "log.jsonl"
+    ap.add_argument("--variant", action="append", default=[],
+                    help=f"name[:key=value{separator}...]")  # fmt: skip
+    ap.add_argument("--work", type=Path, default=Path(work))
+    return ap
+
+
+def campaign_config(campaign: Path, config: Path) -> tuple[dict, int]:
+    """The config the campaign ``campaign`` (results/{scene}) ran with: ``config`` with the
+    world and simulator its capture log records, the scene named after its folder; and its
+    last round."""
+    rounds = json.loads((campaign / "campaign.json").read_text())["rounds"]
+    first_log = campaign / "round_000" / "capture" / "log.jsonl"
     session = json.loads(first_log.read_text().splitlines()[0])
-    doc = read_config_file(args.config) | {k: session["config"][k] for k in ("world", "sim")}
-    doc["scene"] = args.campaign.name
+    doc = read_config_file(config) | {k: session["config"][k] for k in ("world", "sim")}
+    doc["scene"] = campaign.name
+    return doc, max(r["round"] for r in rounds)
+
+
+def main() -> int:
+    ap = variant_parser(__doc__.split("\n\n")[0], "/tmp/bench_plane_fill", ",")
+    args = ap.parse_args()
+    doc, round_index = campaign_config(args.campaign, args.config)
     rows = []
     for spec in args.variant or ["default"]:
         name, _, kv = spec.partition(":")
