@@ -253,6 +253,25 @@ def test_a_box_face_is_not_widened_past_its_cells():
     assert exts[wallj].sum() >= planes[wallj].occupied.sum()
 
 
+def test_a_plane_known_to_bound_the_room_is_widened_whatever_is_measured_past_it():
+    """The ceiling comes from find_ceiling's own test (the room's top: nothing measured above
+    it, allowing for grazing rays a few cm off), and its few hundred points cannot also pass
+    carved_hulls' count of points beyond against those on it: a plane passed as known is a
+    boundary and spans its hull, as the box face above does here."""
+    from scenebot.dense.planes.extents import carved_hulls
+
+    d = wall()
+    d[20:45, 20:45] = 2.0
+    d[75:100, 115:140] = 2.0
+    planes = planes_of(d)
+    face = next(j for j, p in enumerate(planes) if abs(abs(p.offset) - 2.0) < 0.01)
+    exts = carved_hulls(planes, [(d, K, R, T)], known=[face], **HULLS)
+    assert planes[face].boundary
+    # widened to its hull (less the cells the wall behind is measured through)
+    assert exts[face].sum() > planes[face].occupied.sum()
+    assert np.array_equal(exts[face] & planes[face].occupied, planes[face].occupied)
+
+
 def test_a_shadow_plane_a_few_centimetres_off_is_dropped():
     """Three views put the wall at 3.00 m, one (a slightly wrong pose) at 2.94 m: the shadow
     is as large in points as the wall but fewer views support it."""

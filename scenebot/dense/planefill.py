@@ -305,6 +305,7 @@ def _widen_extents(
         distance_m=cfg.label_distance_m,
         rel_distance=cfg.label_rel_distance,
         min_rays=cfg.carve_min_rays,
+        known=[j for j, p in enumerate(planes) if p is ceiling],  # the room's top
     )
     for pl, ext in zip(planes, hulls, strict=True):
         pl.occupied = ext
