@@ -40,9 +40,9 @@ from pathlib import Path
 os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
 from bench_plane_fill import (  # benchmarks/ is the script's folder: on sys.path
-    _value,
     campaign_config,
     link_scene,
+    variant,
     variant_parser,
 )
 
@@ -125,11 +125,10 @@ def main() -> int:
     doc, last_round = campaign_config(args.campaign, args.config)
     rows = []
     for spec in args.variant or ["default"]:
-        name, _, kv = spec.partition(":")
+        name, settings = variant(spec, ";")
         var = json.loads(json.dumps(doc))
-        for item in filter(None, kv.split(";")):
-            key, _, val = item.partition("=")
-            set_key(var.setdefault("dense", {}), key, _value(val))
+        for key, val in settings:
+            set_key(var.setdefault("dense", {}), key, val)
         scene_dir = args.work / name / args.campaign.name
         link_scene(args.campaign, scene_dir)
         print(f"{name}: dense stage ...", file=sys.stderr, flush=True)

@@ -151,21 +151,27 @@ def campaign_config(campaign: Path, config: Path) -> tuple[dict, int]:
     return doc, max(r["round"] for r in rounds)
 
 
+def variant(spec: str, separator: str) -> tuple[str, list[tuple[str, object]]]:
+    """A ``--variant`` as its name and its (key, value) settings (JSON values, else text)."""
+    name, _, kv = spec.partition(":")
+    items = (item.partition("=") for item in filter(None, kv.split(separator)))
+    return name, [(key, _value(val)) for key, _, val in items]
+
+
 def main() -> int:
     ap = variant_parser(__doc__.split("\n\n")[0], "/tmp/bench_plane_fill", ",")
     args = ap.parse_args()
     doc, round_index = campaign_config(args.campaign, args.config)
     rows = []
     for spec in args.variant or ["default"]:
-        name, _, kv = spec.partition(":")
+        name, settings = variant(spec, ",")
         var = json.loads(json.dumps(doc))
         fill = var.setdefault("dense", {}).setdefault("plane_fill", {})
-        for item in filter(None, kv.split(",")):
-            key, _, val = item.partition("=")
+        for key, val in settings:
             if key.startswith("dense."):  # a setting of the dense stage (dense.max_views)
-                var["dense"][key.removeprefix("dense.")] = _value(val)
+                var["dense"][key.removeprefix("dense.")] = val
             else:
-                fill[key] = _value(val)
+                fill[key] = val
         cfg = validate_config(var, f"variant {name}").dense
         scene_dir = args.work / name / args.campaign.name
         run = fill_and_fuse(cfg, link_campaign(args.campaign, scene_dir))
