@@ -41,6 +41,7 @@ os.environ.setdefault("TI_SKIP_VERSION_CHECK", "ON")
 
 from bench_plane_fill import (  # benchmarks/ is the script's folder: on sys.path
     campaign_config,
+    drop_maps,
     link_scene,
     variant,
     variant_parser,
@@ -136,6 +137,8 @@ def main() -> int:
         final = evaluate(var, scene_dir, last_round, scene_dir / "final/dense/fused.ply", True)
         measured = evaluate(var, scene_dir, last_round, measured_cloud(var, scene_dir), False)
         rows.append({"name": name, "run": run, "final": final, "measured": measured})
+        if not args.keep_maps:
+            drop_maps(scene_dir)
         if args.json:
             args.json.write_text(json.dumps(rows, indent=1, default=str))
     print_table(rows)

@@ -136,7 +136,18 @@ def variant_parser(description: str, work: str, separator: str) -> argparse.Argu
     ap.add_argument("--variant", action="append", default=[],
                     help=f"name[:key=value{separator}...]")  # fmt: skip
     ap.add_argument("--work", type=Path, default=Path(work))
+    ap.add_argument("--keep-maps", action="store_true",
+                    help="keep each variant's depth and normal maps (about 5 MB a view; by "
+                    "default removed once the variant is evaluated)")  # fmt: skip
     return ap
+
+
+def drop_maps(scene_dir: Path) -> None:
+    """Remove the depth and normal maps a variant wrote under ``scene_dir``'s ``final/``
+    (its stereo folders; the clouds, pictures and summaries stay): a variant of the default
+    office writes 1-2.5 GB of them, and a session's variants filled a 29 GB disk."""
+    for stereo in (scene_dir / "final").glob("*/stereo"):
+        shutil.rmtree(stereo, ignore_errors=True)
 
 
 def campaign_config(campaign: Path, config: Path) -> tuple[dict, int]:
@@ -178,6 +189,8 @@ def main() -> int:
         dense = evaluate(var, scene_dir, round_index)
         by = {m["material"]: m["completeness"]["2cm"] for m in dense["breakdown"]["by_material"]}
         rows.append((name, dense, by, run))
+        if not args.keep_maps:
+            drop_maps(scene_dir)
     print("| variant | views | 2 cm: completeness / accuracy / F | 5 cm | ceiling | walls "
           "| planes |")  # fmt: skip
     print("|---|---:|---|---|---:|---:|---:|")
