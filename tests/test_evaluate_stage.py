@@ -348,3 +348,38 @@ def test_localization_estimates_are_compared_in_the_world_frame(tmp_path):
     assert acc["fixes"]["heading_error_deg"]["median"] == pytest.approx(0.0, abs=1e-6)
     assert acc["photos"]["position_error_m"]["median"] == pytest.approx(0.04, abs=1e-6)
     assert acc["photos"]["heading_error_deg"]["median"] == pytest.approx(np.degrees(0.02))
+    assert acc["turned_away"] == {}  # the failure had no pose
+
+
+def test_fixes_turned_away_are_judged_against_the_truth(tmp_path):
+    """A fix the robot's checks turned away with a pose in hand (``rejected_pose`` of a
+    ``localize_failed``, a ``localize_rejected``'s fix) is compared with the truth: per
+    reason, how many were right (within 5 cm) and how many wrong (beyond 25 cm)."""
+    cap, sfm = write_round(tmp_path)
+    sim = robot_to_world(sfm, [cap])
+    c_w, th = np.array([2.5, 1.0, 0.35]), 0.7
+    R_w = look_rotation(th)
+    truth = {"robot": {"x": 2.4, "y": 1.0, "theta": th}, "center": c_w.tolist(),
+             "R_cam_from_world": R_w.tolist()}  # fmt: skip
+
+    def pose(dx: float) -> dict:
+        return {"center": to_robot(c_w + np.array([dx, 0.0, 0.0])).tolist(),
+                "R_cam_from_world": (R_w @ R_TRUE).tolist()}  # fmt: skip
+
+    with CaptureLog(tmp_path / "r1" / "log.jsonl") as log:
+        for dx in (0.01, 0.02, 1.5):
+            failed = {"ok": False, "reason": "uncertain_pose", "rejected_pose": pose(dx)}
+            log.write({"type": "event", "event": "localize_failed", "localization": failed,
+                       "truth": truth})  # fmt: skip
+        log.write({"type": "event", "event": "localize_failed", "truth": truth,
+                   "localization": {"ok": False, "reason": "too_few_matches"}})  # fmt: skip
+        log.write({"type": "event", "event": "localize_rejected", "reason": "odometry",
+                   "localization": {"ok": True} | pose(2.0), "truth": truth})  # fmt: skip
+    acc = localization_accuracy([tmp_path / "r1"], sim)
+    assert acc["failed_fixes"] == 4 and acc["fixes"]["count"] == 0
+    uncertain = acc["turned_away"]["uncertain_pose"]
+    assert uncertain["count"] == 3 and uncertain["right"] == 2 and uncertain["wrong"] == 1
+    assert uncertain["position_error_m"]["median"] == pytest.approx(0.02, abs=1e-6)
+    odometry = acc["turned_away"]["odometry"]
+    assert odometry["count"] == 1 and odometry["wrong"] == 1 and odometry["right"] == 0
+    assert set(acc["turned_away"]) == {"uncertain_pose", "odometry"}

@@ -110,6 +110,7 @@ def test_pose_off_the_camera_plane_or_tilted_is_rejected(room_map):
     wrong_plane = LocalizeConfig(camera_plane_z_m=0.5)
     est = localize(img, lmap, wrong_plane)
     assert isinstance(est, LocalizationFailure) and est.reason is FailureReason.IMPLAUSIBLE_POSE
+    assert "rejected_pose" in est.as_record()
     tilted = LocalizeConfig(camera_pitch_deg=10.0)
     assert localize(img, lmap, tilted).reason is FailureReason.IMPLAUSIBLE_POSE
     unchecked = LocalizeConfig(camera_plane_z_m=None, camera_pitch_deg=None)
@@ -130,3 +131,8 @@ def test_a_fix_whose_predicted_error_is_too_large_is_a_failure(room_map):
     tight = localize(img, lmap, LocalizeConfig(max_position_std_m=0.5 * est.position_std_m))
     assert isinstance(tight, LocalizationFailure)
     assert tight.reason is FailureReason.UNCERTAIN_POSE
+    # the pose it turned away goes to the log, for the evaluation to judge
+    rejected = tight.as_record()["rejected_pose"]
+    np.testing.assert_allclose(rejected["center"], est.center, atol=1e-9)
+    assert rejected["heading"] == pytest.approx(est.heading)
+    assert rejected["position_std_m"] == pytest.approx(est.position_std_m)

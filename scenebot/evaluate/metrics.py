@@ -375,20 +375,29 @@ def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
     ``localize_failed`` are counted, and ``localize_skipped`` (no photo taken: the map
     predicted too few matches, ``follow.min_matchable_points``).
 
+    The fixes the robot turned away with a pose in hand are judged too (``turned_away``, per
+    reason): ``localize_failed`` with a ``rejected_pose`` (``implausible_pose``,
+    ``uncertain_pose``) and ``localize_rejected`` (against odometry or the compass), each
+    with its error statistics and how many lay within :data:`RIGHT_FIX_M` of the truth (a
+    right fix the checks cost the robot) or beyond :data:`WRONG_FIX_M` (a wrong one they
+    kept out).
+
     Returns:
-        ``{"fixes": {...}, "photos": {...}, "failed_fixes": n, "skipped_fixes": n}``, the
-        first two with ``count``, ``position_error_m`` / ``heading_error_deg`` statistics
-        and ``per_estimate``.
+        ``{"fixes": {...}, "photos": {...}, "failed_fixes": n, "skipped_fixes": n,
+        "turned_away": {reason: {...}}}``, the first two with ``count``,
+        ``position_error_m`` / ``heading_error_deg`` statistics and ``per_estimate``.
     """
     fixes, photos, failed, skipped = [], [], 0, 0
+    turned: dict[str, list] = {}
     for cap in captures:
         path = _log_path(cap)
         if not path.is_file():
             continue
         for rec in read_log(path):
             kind, event = rec.get("type"), rec.get("event")
-            if kind == "event" and event == "localize_failed":
-                failed += 1
+            if kind == "event" and event in ("localize_failed", "localize_rejected"):
+                failed += event == "localize_failed"
+                _turned_away(rec, sim, turned)
                 continue
             if kind == "event" and event == "localize_skipped":
                 skipped += 1
@@ -409,4 +418,33 @@ def localization_accuracy(captures: Sequence[Path], sim: Similarity) -> dict:
         "photos": _summary(photos),
         "failed_fixes": failed,
         "skipped_fixes": skipped,
+        "turned_away": {
+            reason: _summary(errs)
+            | {
+                "right": sum(e[1] <= RIGHT_FIX_M for e in errs),
+                "wrong": sum(e[1] > WRONG_FIX_M for e in errs),
+            }
+            for reason, errs in sorted(turned.items())
+        },
     }
+
+
+RIGHT_FIX_M = 0.05
+"""A turned-away fix within this (m) of the truth was right (``turned_away`` ``right``)."""
+WRONG_FIX_M = 0.25
+"""A turned-away fix beyond this (m) of the truth was wrong (``turned_away`` ``wrong``)."""
+
+
+def _turned_away(rec: dict, sim: Similarity, into: dict[str, list]) -> None:
+    """Add a fix the robot did not use, where it had a pose, to ``into[reason]``: the pose a
+    ``localize_failed`` judged (``rejected_pose``) or a ``localize_rejected``'s fix."""
+    loc, tr = rec.get("localization"), rec.get("truth")
+    if not isinstance(loc, dict) or not isinstance(tr, dict):
+        return
+    if rec.get("event") == "localize_rejected":
+        pose, reason = loc, str(rec.get("reason", "rejected"))
+    else:
+        pose, reason = loc.get("rejected_pose"), str(loc.get("reason", "failed"))
+    got = _loc_error(pose, tr, sim) if isinstance(pose, dict) else None
+    if got is not None:
+        into.setdefault(reason, []).append((str(rec.get("image", "")), got[0], got[1]))

@@ -524,6 +524,14 @@ def main_summary(ev: dict) -> str:
     if fixes.get("count"):
         med = 100 * fixes["position_error_m"]["median"]
         lines.append(f"{fixes['count']} visual fixes, median error {med:.2f} cm")
+    away = (ev.get("localization") or {}).get("turned_away") or {}
+    if away:
+        lines.append(
+            "fixes turned away: " + ", ".join(
+                f"{r} {v['count']} ({v['right']} right, {v['wrong']} wrong)"
+                for r, v in away.items()
+            )
+        )  # fmt: skip
     if ev.get("dense"):
         d = ev["dense"]
         lines.append(

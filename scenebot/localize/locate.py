@@ -48,13 +48,18 @@ class LocalizationFailure:
     num_matches: int = 0
     num_inliers: int = 0
     timings_s: dict = field(default_factory=dict)
+    rejected: PoseEstimate | None = None
 
     @property
     def ok(self) -> bool:
         return False
 
     def as_record(self) -> dict:
-        return {
+        """The failure as the capture log writes it; a pose that was estimated and then
+        judged (``implausible_pose``, ``uncertain_pose``) goes along as ``rejected_pose``
+        (centre, heading, predicted error), so that the evaluation can tell how often the
+        checks turned away a right fix (:func:`scenebot.evaluate.metrics.localization_accuracy`)."""
+        out = {
             "ok": False,
             "reason": str(self.reason),
             "num_features": self.num_features,
@@ -62,6 +67,16 @@ class LocalizationFailure:
             "num_inliers": self.num_inliers,
             "timings_s": self.timings_s,
         }
+        if self.rejected is not None:
+            r = self.rejected
+            out["rejected_pose"] = {
+                "center": r.center.tolist(),
+                "heading": r.heading,
+                "R_cam_from_world": r.R.tolist(),
+                "position_std_m": r.position_std_m,
+                "rmse_px": r.rmse_px,
+            }
+        return out
 
 
 @dataclass(frozen=True)
@@ -309,11 +324,11 @@ def localize(
     est = PoseEstimate(R, t, f, len(kps), len(matches), n_inl, rmse, cfg.method, timings, std)
     if not plausible_robot_camera(est, cfg):
         return LocalizationFailure(
-            FailureReason.IMPLAUSIBLE_POSE, len(kps), len(matches), n_inl, timings
+            FailureReason.IMPLAUSIBLE_POSE, len(kps), len(matches), n_inl, timings, est
         )
     if cfg.max_position_std_m is not None and not std <= cfg.max_position_std_m:
         return LocalizationFailure(
-            FailureReason.UNCERTAIN_POSE, len(kps), len(matches), n_inl, timings
+            FailureReason.UNCERTAIN_POSE, len(kps), len(matches), n_inl, timings, est
         )
     return est
 
