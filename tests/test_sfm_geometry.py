@@ -227,6 +227,27 @@ def test_plane_normal_sign_follows_camera_up():
     assert stats2["plane_degenerate"] and n2 @ np.array([0.0, 0.6, 0.8]) > 0.999
 
 
+@pytest.mark.parametrize("seed", range(20))
+def test_plane_normal_holds_against_photos_registered_far_off(seed):
+    """An L of 110 camera centres in the plane z = 0 and 8 photos registered metres off
+    (not yet left out when the frame is fitted): the plane stays level within 0.1 deg (a
+    first fit through every centre tilted it by up to 4 deg on these seeds; a generated
+    room's round 1 came out 1.6 deg tilted, every localization fix of a level camera then
+    'implausible')."""
+    rng = np.random.default_rng(seed)
+    xy = np.r_[np.c_[rng.uniform(0, 4, 60), rng.uniform(0, 1.5, 60)],
+               np.c_[rng.uniform(0, 1.5, 50), rng.uniform(1.5, 5, 50)]]  # fmt: skip
+    centres = np.c_[xy, rng.normal(0, 0.002, len(xy))]
+    ups = np.tile([0.0, 0.0, 1.0], (len(xy), 1)) + rng.normal(0, 0.002, (len(xy), 3))
+    far = np.c_[rng.uniform(-10, 15, (8, 2)), rng.uniform(-1.5, 1.5, 8)]
+    centres = np.r_[centres, far]
+    ups = np.r_[ups, np.tile([0.0, 0.0, 1.0], (8, 1)) + rng.normal(0, 0.2, (8, 3))]
+    ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+    n, stats = fit_plane_normal(centres, ups)
+    assert math.degrees(math.acos(min(1.0, n[2]))) < 0.1
+    assert not stats["plane_degenerate"]
+
+
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 10_000), st.floats(0.01, 100.0))
 def test_umeyama_recovers_similarity(seed, scale):

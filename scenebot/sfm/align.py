@@ -106,7 +106,11 @@ def fit_plane_normal(centers: np.ndarray, ups: np.ndarray) -> tuple[np.ndarray, 
     """
     mean_up = ups.mean(0)
     mean_up /= np.linalg.norm(mean_up)
-    keep = np.ones(len(centers), bool)
+    # the first inliers: the centres near the plane the cameras' up vectors say (photos
+    # registered metres off, not yet left out, would tilt a first fit through every centre,
+    # and the trimming could then settle on that tilt: 1.6 deg in a generated room's round)
+    r = np.abs((centers - np.median(centers, 0)) @ mean_up)
+    keep = r <= max(3.0 * 1.4826 * float(np.median(r)), 1e-9)
     n = mean_up
     sv = np.zeros(3)
     for _ in range(4):
