@@ -201,6 +201,50 @@ def test_a_map_whose_circles_disagree_on_the_scale_is_mapped_again(round0, monke
         assert acc["metric_scale_error"] < 0.01
 
 
+def _fold_circles(rec, per_circle=12):
+    """Move every photo of each circle 12 cm (1.2 radius) off it in a direction of its own:
+    a map that no longer keeps the photos turned in place on any circle (folded)."""
+    rng = np.random.default_rng(5)
+    for i in sorted(rec.reg_image_ids(), key=lambda i: rec.image(i).name):
+        im = rec.image(i)
+        rot = im.cam_from_world().rotation
+        a = rng.uniform(0, 2 * np.pi)
+        centre = im.projection_center() + 0.12 * np.array([np.cos(a), np.sin(a), 0.0])
+        rec.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(rot, -rot.matrix() @ centre)
+
+
+def test_a_map_that_keeps_no_circle_is_mapped_again(round0, monkeypatch):
+    """The first mapping run comes back with every circle's photos off it (each circle
+    rejected for its residual, none left for the lever-arm scale): the stage maps again with
+    the next seed and keeps the run whose circles hold, instead of taking the scale from
+    odometry on a folded map."""
+    import scenebot.sfm.stage as stage
+
+    base, cap, _, _, _ = round0
+    real = stage.map_photos
+    seeds = []
+
+    def folded_first(*args, **kwargs):
+        res = real(*args, **kwargs)
+        seeds.append(args[4].random_seed)
+        if len(seeds) == 1:
+            _fold_circles(res.reconstruction)
+        return res
+
+    monkeypatch.setattr(stage, "map_photos", folded_first)
+    cfg = SfmConfig(exhaustive_max_images=10, plots=False, camera_offset_m=0.10, num_threads=1)
+    out = SfmOutputs(base / "folded")
+    report = run(cfg, SfmInputs(base / "sfm_db" / "database.db", [cap]), out)
+    checked = report["scale"]["mapping_runs_checked"]
+    assert checked[0]["circles_off"] and checked[0]["circle_scale_spread"] is None
+    assert [c["kept"] for c in checked] == [False, True]
+    assert not checked[1]["circles_off"]
+    assert checked[1]["circle_scale_spread"] < cfg.max_circle_scale_spread
+    assert report["scale"]["source"] == "camera_lever_arm"
+    assert json.loads(out.accuracy.read_text())["metric_scale_error"] < 0.01
+    json.loads(out.report.read_text())  # strict JSON: no Infinity
+
+
 def test_photos_off_their_circle_are_moved_back(round0):
     """A run of 3 photos of one circle displaced by 15 cm (a misregistration) goes back onto
     its circle; the rest stays put."""

@@ -312,6 +312,7 @@ def _check_circle(
         d["radius_units"] = radius_c
         d["residual_median_units"] = float(np.nanmedian(r_c))
         if not d["residual_median_units"] <= max_rel_residual * radius_c:
+            d["off_circle"] = True  # the map does not keep the photos on their circle
             d["rejected"] = (
                 f"photos lie {d['residual_median_units'] / radius_c:.0%} of the radius "
                 f"off the fitted circle (> {max_rel_residual:.0%})"

@@ -265,6 +265,23 @@ def drop_off_compass(
     return out
 
 
+def circle_disagreement(alignment: Alignment) -> float | None:
+    """How badly the turn-in-place circles disagree with the map: their scale spread
+    (:func:`circle_scale_spread`), or infinity when two or more circles were long enough to
+    check but the map left their photos off any circle (each rejected for its residual) and
+    fewer than two remain (a map folded by repeating texture: the robot turned in place, the
+    map says it did not; a generated room's round 0 came out so with its circles 32-167 % of
+    their radius off, and the scale then fell back to odometry, 30 % off); None when there is
+    nothing to judge by."""
+    spread = circle_scale_spread(alignment)
+    if spread is not None:
+        return spread
+    circles = alignment.stats.get("circles", [])
+    off = sum(bool(c.get("off_circle")) for c in circles)
+    used = sum(bool(c.get("used")) for c in circles)
+    return math.inf if off >= 2 and used < 2 else None
+
+
 def circle_scale_spread(alignment: Alignment) -> float | None:
     """How far apart the metric scales of the turn-in-place circles, each fitted on its
     own, lie: (max - min) / mean over the circles the lever-arm scale used; ``None`` when
@@ -317,7 +334,8 @@ def _remap_while_circles_disagree(
 ) -> tuple[MappingResult, Alignment, list[dict]]:
     """Map again from scratch with other seeds while the circles of photos turned in place
     disagree on the metric scale by more than ``cfg.max_circle_scale_spread`` (a bent map:
-    runs of a circle misregistered bend its radius, and the lever-arm scale with it), at most
+    runs of a circle misregistered bend its radius, and the lever-arm scale with it), or the
+    map keeps no two of them on a circle (:func:`circle_disagreement`: folded), at most
     ``cfg.scale_remap_attempts`` times; keep the map whose circles agree best among those
     that register as many photos as the first (within 2 %). Maps continued from the
     previous round are not re-run (their scale is the previous round's).
@@ -327,7 +345,7 @@ def _remap_while_circles_disagree(
         mapping run checked: seed, photos registered, circle scale spread, seconds, kept.
     """
     cfg = s.cfg
-    spread = circle_scale_spread(alignment)
+    spread = circle_disagreement(alignment)
     if spread is None or mres.continued:
         return mres, alignment, []
     first_seed = cfg.random_seed + max(mres.attempts, 1) - 1
@@ -335,7 +353,8 @@ def _remap_while_circles_disagree(
         {
             "seed": first_seed,
             "registered": mres.reconstruction.num_reg_images(),
-            "circle_scale_spread": spread,
+            "circle_scale_spread": _finite(spread),
+            "circles_off": math.isinf(spread),
             "seconds": mres.seconds,
         }
     ]
@@ -359,10 +378,16 @@ def _remap_while_circles_disagree(
             log.warning("mapping again with seed %d failed: %s", seed, exc)
             runs.append({"seed": seed, "failed": str(exc)})
             continue
-        s2 = circle_scale_spread(a2)
+        s2 = circle_disagreement(a2)
         n2 = m2.reconstruction.num_reg_images()
         runs.append(
-            {"seed": seed, "registered": n2, "circle_scale_spread": s2, "seconds": m2.seconds}
+            {
+                "seed": seed,
+                "registered": n2,
+                "circle_scale_spread": _finite(s2),
+                "circles_off": s2 is not None and math.isinf(s2),
+                "seconds": m2.seconds,
+            }
         )
         if s2 is not None and s2 < best[0] and n2 >= 0.98 * n_first:
             best = (s2, m2, a2, len(runs) - 1)
@@ -370,21 +395,34 @@ def _remap_while_circles_disagree(
         r["kept"] = i == best[3]
     if len(runs) > 1:
         log.info(
-            "kept mapping run with seed %d: circle scale spread %.1f %%",
+            "kept mapping run with seed %d: circle scale spread %s",
             runs[best[3]]["seed"],
-            100 * best[0],
+            _spread_text(best[0]),
         )
     return best[1], best[2], runs
 
 
+def _finite(x: float | None) -> float | None:
+    """``x`` for report.json (None for infinity: JSON has none)."""
+    return None if x is None or math.isinf(x) else x
+
+
+def _spread_text(spread: float) -> str:
+    return "none (no two circles on a circle)" if math.isinf(spread) else f"{100 * spread:.1f} %"
+
+
 def _log_remap(cfg: SfmConfig, spread: float, seed: int, k: int) -> None:
     """Warn that the map is bent and mapping runs again (attempt ``k``, from 0)."""
+    why = (
+        "the map keeps no two circles of photos turned in place on a circle: it is folded"
+        if math.isinf(spread)
+        else f"the circles of photos turned in place disagree on the metric scale by "
+        f"{100 * spread:.1f} % (sfm.max_circle_scale_spread = "
+        f"{100 * cfg.max_circle_scale_spread:.1f} %): the map is bent"
+    )
     log.warning(
-        "the circles of photos turned in place disagree on the metric scale by %.1f %% "
-        "(sfm.max_circle_scale_spread = %.1f %%): the map is bent; mapping again from "
-        "scratch with seed %d (%d of sfm.scale_remap_attempts = %d)",
-        100 * spread,
-        100 * cfg.max_circle_scale_spread,
+        "%s; mapping again from scratch with seed %d (%d of sfm.scale_remap_attempts = %d)",
+        why,
         seed,
         k + 1,
         cfg.scale_remap_attempts,
