@@ -322,13 +322,20 @@ def test_reference_cameras_read_the_same_from_every_format(tmp_path):
         read_reference_cameras(tmp_path / "nope.txt")
 
 
-def test_localization_estimates_are_compared_in_the_world_frame(tmp_path):
+def _round_and_truth(tmp_path):
+    """A written round, its robot-to-world similarity, and a true camera pose (centre c_w,
+    heading th, rotation R_w) as a log's ``truth``."""
     cap, sfm = write_round(tmp_path)
     sim = robot_to_world(sfm, [cap])
     c_w, th = np.array([2.5, 1.0, 0.35]), 0.7
     R_w = look_rotation(th)
     truth = {"robot": {"x": 2.4, "y": 1.0, "theta": th}, "center": c_w.tolist(),
              "R_cam_from_world": R_w.tolist()}  # fmt: skip
+    return sim, c_w, th, R_w, truth
+
+
+def test_localization_estimates_are_compared_in_the_world_frame(tmp_path):
+    sim, c_w, th, R_w, truth = _round_and_truth(tmp_path)
     fix = {"ok": True, "center": to_robot(c_w + np.array([0.03, 0.0, 0.0])).tolist(),
            "R_cam_from_world": (R_w @ R_TRUE).tolist()}  # fmt: skip
     xy = to_robot(np.array([2.4, 1.04, 0.35]))
@@ -355,12 +362,7 @@ def test_fixes_turned_away_are_judged_against_the_truth(tmp_path):
     """A fix the robot's checks turned away with a pose in hand (``rejected_pose`` of a
     ``localize_failed``, a ``localize_rejected``'s fix) is compared with the truth: per
     reason, how many were right (within 5 cm) and how many wrong (beyond 25 cm)."""
-    cap, sfm = write_round(tmp_path)
-    sim = robot_to_world(sfm, [cap])
-    c_w, th = np.array([2.5, 1.0, 0.35]), 0.7
-    R_w = look_rotation(th)
-    truth = {"robot": {"x": 2.4, "y": 1.0, "theta": th}, "center": c_w.tolist(),
-             "R_cam_from_world": R_w.tolist()}  # fmt: skip
+    sim, c_w, _th, R_w, truth = _round_and_truth(tmp_path)
 
     def pose(dx: float) -> dict:
         return {"center": to_robot(c_w + np.array([dx, 0.0, 0.0])).tolist(),

@@ -158,26 +158,33 @@ def _bend_circles(rec, factors, per_circle=12):
             rec.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(rot, -rot.matrix() @ centre)
 
 
+def _spoil_first_mapping(monkeypatch, spoil) -> list[int]:
+    """Make the stage's first mapping run come back spoiled by ``spoil(reconstruction)``;
+    returns the seeds of the mapping runs, filled as they run."""
+    import scenebot.sfm.stage as stage
+
+    real = stage.map_photos
+    seeds: list[int] = []
+
+    def spoiled_first(*args, **kwargs):
+        res = real(*args, **kwargs)
+        seeds.append(args[4].random_seed)
+        if len(seeds) == 1:
+            spoil(res.reconstruction)
+        return res
+
+    monkeypatch.setattr(stage, "map_photos", spoiled_first)
+    return seeds
+
+
 @pytest.mark.parametrize("remaps", [0, 2])
 def test_a_map_whose_circles_disagree_on_the_scale_is_mapped_again(round0, monkeypatch, remaps):
     """The first mapping run comes back bent (circle radii x1.10, x0.99, x1.04: the circles'
     own scales 10 % apart, none far enough out to be rejected): with re-mapping allowed the
     stage maps again with the next seed and keeps the run whose circles agree; without, the
     bent map's scale error stays."""
-    import scenebot.sfm.stage as stage
-
     base, cap, _, _, _ = round0
-    real = stage.map_photos
-    seeds = []
-
-    def bent_first(*args, **kwargs):
-        res = real(*args, **kwargs)
-        seeds.append(args[4].random_seed)
-        if len(seeds) == 1:
-            _bend_circles(res.reconstruction, (1.10, 0.99, 1.04))
-        return res
-
-    monkeypatch.setattr(stage, "map_photos", bent_first)
+    seeds = _spoil_first_mapping(monkeypatch, lambda rec: _bend_circles(rec, (1.10, 0.99, 1.04)))
     cfg = SfmConfig(
         exhaustive_max_images=10,
         plots=False,
@@ -218,26 +225,15 @@ def test_a_map_that_keeps_no_circle_is_mapped_again(round0, monkeypatch):
     rejected for its residual, none left for the lever-arm scale): the stage maps again with
     the next seed and keeps the run whose circles hold, instead of taking the scale from
     odometry on a folded map."""
-    import scenebot.sfm.stage as stage
-
     base, cap, _, _, _ = round0
-    real = stage.map_photos
-    seeds = []
-
-    def folded_first(*args, **kwargs):
-        res = real(*args, **kwargs)
-        seeds.append(args[4].random_seed)
-        if len(seeds) == 1:
-            _fold_circles(res.reconstruction)
-        return res
-
-    monkeypatch.setattr(stage, "map_photos", folded_first)
+    seeds = _spoil_first_mapping(monkeypatch, _fold_circles)
     cfg = SfmConfig(exhaustive_max_images=10, plots=False, camera_offset_m=0.10, num_threads=1)
     out = SfmOutputs(base / "folded")
     report = run(cfg, SfmInputs(base / "sfm_db" / "database.db", [cap]), out)
     checked = report["scale"]["mapping_runs_checked"]
     assert checked[0]["circles_off"] and checked[0]["circle_scale_spread"] is None
     assert [c["kept"] for c in checked] == [False, True]
+    assert seeds == [0, cfg.mapping_attempts]  # mapped again with the next seed
     assert not checked[1]["circles_off"]
     assert checked[1]["circle_scale_spread"] < cfg.max_circle_scale_spread
     assert report["scale"]["source"] == "camera_lever_arm"
