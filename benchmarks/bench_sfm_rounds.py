@@ -121,17 +121,22 @@ def whole_set_loops(select_pairs):
     return select
 
 
-def one_run(cfg: SfmConfig, campaign: Path, r: int, work: Path) -> dict:
-    """The sfm stage of round r on a cut copy of the campaign's database; its figures."""
+def one_run(cfg: SfmConfig, campaign: Path, r: int, work: Path, guided: bool = False) -> dict:
+    """The sfm stage of round r on a cut copy of the campaign's database; its figures.
+    ``guided``: a person's campaign (robot: guided, person-sim): the person's map check,
+    and the previous round's shots."""
     shutil.rmtree(work, ignore_errors=True)
     db = work / "database.db"
     kept = cut_database(campaign / "sfm_db" / "database.db", db, r)
     captures = [campaign / f"round_{k:03d}" / "capture" for k in range(r + 1)]
     previous = campaign / f"round_{r - 1:03d}" / "sfm" if r > 0 else None  # round 0: scratch
-    inputs = SfmInputs(database=db, capture_dirs=captures, previous_model=previous)
+    shots = campaign / f"round_{r - 1:03d}" / "goals.json" if guided and r > 0 else None
+    inputs = SfmInputs(
+        database=db, capture_dirs=captures, previous_model=previous, shots_json=shots
+    )
     load = os.getloadavg()[0]
     t = time.perf_counter()
-    report = run(cfg, inputs, SfmOutputs(model_dir=work / "model"))
+    report = run(cfg, inputs, SfmOutputs(model_dir=work / "model"), person=guided)
     wall = time.perf_counter() - t
     acc = report.get("accuracy") or {}
     return {
@@ -172,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="write every run's figures here")
     args = ap.parse_args(argv)
 
-    base = load_config(args.config).sfm
+    config = load_config(args.config)
+    base, guided = config.sfm, config.guided_rounds()
     variants = [parse_variant(v) for v in (args.variant or ["default"])]
     results: dict[str, dict[int, list[dict]]] = {name: {} for name, _ in variants}
     for r in args.rounds:
@@ -186,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
                     else pairs.select_pairs
                 )
                 cfg = SfmConfig.model_validate({**base.model_dump(), **changes})
-                res = one_run(cfg, args.campaign, r, args.work / f"r{r}" / name)
+                res = one_run(cfg, args.campaign, r, args.work / f"r{r}" / name, guided)
                 results[name].setdefault(r, []).append(res)
                 print(f"round {r} {name} repeat {rep}: {res['wall_s']:.1f} s", flush=True)
 

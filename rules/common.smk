@@ -227,6 +227,14 @@ def person_mesh(wildcards):
     return [f"{round_dir(wildcards.r)}/mesh.ply"] if PERSON else []
 
 
+def guide_shots(wildcards):
+    """A guided round's shots (round r-1's goals.json): the sfm stage expects each of the
+    person's new photos near one of them (sfm.person_shot_distance_m). None for round 0 and
+    for a robot's rounds."""
+    r = int(wildcards.r)
+    return [f"{round_dir(r - 1)}/goals.json"] if GUIDED and r > 0 else []
+
+
 def captures_until(wildcards):
     """The capture logs of rounds 0..r (the map of round r uses all of them)."""
     r = int(wildcards.r)

@@ -11,6 +11,7 @@ rule sfm:
     input:
         code=stage_code("sfm"),
         captures=captures_until,
+        shots=guide_shots,
     output:
         model=multiext(
             f"{RESULTS}/round_{{r}}/sfm/",
@@ -41,10 +42,11 @@ rule sfm:
         previous=lambda w: options(  # round r-1's map, continued from where it holds one
             previous_model=[f"{round_dir(int(w.r) - 1)}/sfm"] if int(w.r) > 0 else []
         ),
+        shots=lambda w, input: options(shots_json=input.shots),  # a guided round's shots
         model=lambda w, output: Path(output.report).parent,
     shell:
         "{params.py:q} -m scenebot sfm --params {params.cfg:q} --database {params.database:q} "
-        "{params.photos} {params.previous} --model-dir {params.model:q} "
+        "{params.photos} {params.previous} {params.shots} --model-dir {params.model:q} "
         "2> >(tee {log:q} >&2)"
 
 

@@ -62,7 +62,8 @@ def cmd_capture(args) -> int:
 # file. Written here rather than read from the dataclasses, so that building the parser imports
 # no stage (tests/test_cli.py checks that the two agree).
 STAGE_FILES = {
-    "sfm": ("database", "capture_dirs*", "photo_folder?", "previous_model?", "model_dir"),
+    "sfm": ("database", "capture_dirs*", "photo_folder?", "previous_model?", "shots_json?",
+            "model_dir"),
     "mesh": ("sfm_dir", "mesh_ply", "freespace_json", "freespace_npz", "freespace_png?"),
     "score": ("sfm_dir", "mesh_ply", "freespace_npz", "candidates_csv", "views_png?"),
     "goals": ("candidates_csv", "freespace_npz", "sfm_dir?", "previous_goals_json?",

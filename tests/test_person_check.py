@@ -13,6 +13,7 @@ from scenebot.sfm.mapping import filter_observations
 from scenebot.sfm.person_check import (
     MIN_MEDIAN_PAIR_SHARE,
     PairGeometry,
+    blamed_pairs,
     check_person_map,
     contradicted_pairs,
     fit_plane,
@@ -182,3 +183,18 @@ def test_a_map_failing_as_a_whole_ranks_below_one_with_photos_to_leave_out():
     named = PersonCheck(False, ["12 pairs"], [(f"p{i}", f"q{i}", 40, 0.0) for i in range(12)])
     assert _unplaced(s, mres, named) < _unplaced(s, mres, folded)
     assert _unplaced(s, mres, PersonCheck(True)) < _unplaced(s, mres, named)
+
+
+def test_a_pair_contradicted_for_neither_photo_is_a_wrong_match():
+    """Photo x has 3 of its 4 pairs contradicted: registered off, its pairs are blamed. The
+    pair a-b is contradicted too, but a and b agree with the map on 2 of their 3 pairs each:
+    a wrong match (identical objects at two places), not a wrong map."""
+    held = [("a", "c", 50, 0.8), ("a", "d", 50, 0.8), ("b", "c", 50, 0.8), ("b", "d", 50, 0.7)]
+    held += [("x", "e", 40, 0.7), ("c", "d", 60, 0.9), ("f", "c", 50, 0.8), ("f", "d", 50, 0.8)]
+    wrong = ("a", "b", 40, 0.05)
+    off = [("x", "c", 40, 0.0), ("x", "d", 40, 0.1), ("f", "x", 40, 0.05)]
+    shares = [*held, wrong, *off]
+    bad, _ = contradicted_pairs(shares, 0.25)
+    assert sorted(bad) == sorted([wrong, *off])
+    blamed, wrong_matches = blamed_pairs(bad, shares)
+    assert sorted(blamed) == sorted(off) and wrong_matches == [wrong]

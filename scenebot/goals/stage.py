@@ -254,6 +254,20 @@ COVERAGE_VERTICES = 20000
 """Mesh vertices (a seeded sample) whose photo counts the coverage picture shows."""
 
 
+def _person_min_matchable(cfg: GoalsConfig, sfm_dir: Path | None) -> int:
+    """The map points a person's shot must be predicted to match: ``goals.min_matchable_points``,
+    or ``goals.person_min_matchable_share`` of what the map's median photo observes when
+    more."""
+    if sfm_dir is None or cfg.person_min_matchable_share <= 0:
+        return cfg.min_matchable_points
+    import pycolmap
+
+    rec = pycolmap.Reconstruction(str(sfm_dir))
+    seen = [rec.image(i).num_points3D for i in rec.reg_image_ids()]
+    median = float(np.median(seen)) if seen else 0.0
+    return max(cfg.min_matchable_points, round(cfg.person_min_matchable_share * median))
+
+
 def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, cols: dict,
                   where: str) -> dict:  # fmt: skip
     """The next shots of a person (``robot: photos``): the score method's choice among the
@@ -283,14 +297,16 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     inside = vol.contains(poses[:, :3])
     valid = (cols["hit_fraction"] >= cfg.min_hit_fraction) & inside
     any_valid = valid.copy()
+    min_points = _person_min_matchable(cfg, inputs.sfm_dir)
     registrable = (cols["seen_fraction"] >= cfg.min_seen_fraction) & (
-        cols["matchable_points"] >= cfg.min_matchable_points
+        cols["matchable_points"] >= min_points
     )
     if (valid & registrable).any():
         valid &= registrable
     elif valid.any():
         log.warning("%s: no candidate could be registered (goals.min_seen_fraction, "
-                    "goals.min_matchable_points); goals ignore the overlap", where)  # fmt: skip
+                    "goals.min_matchable_points, goals.person_min_matchable_share: %d "
+                    "points); goals ignore the overlap", where, min_points)  # fmt: skip
     score = np.where(valid, cols["score_deg"], np.nan)
     ranked = select_goals_3d(
         poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
@@ -306,7 +322,7 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
             "n_valid": int(valid.sum()),
             "n_in_free_space": int(inside.sum()),
             "min_seen_fraction": cfg.min_seen_fraction,
-            "min_matchable_points": cfg.min_matchable_points,
+            "min_matchable_points": min_points,
             "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
             "nms_radius_m": cfg.nms_radius_m,
             "nms_angle_deg": cfg.nms_angle_deg,

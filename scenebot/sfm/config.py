@@ -442,6 +442,26 @@ class SfmConfig(Settings):
             "person-sim: its person_sim.height_std_m unless set. 0 turns the plane off."
         ),
     )
+    person_shot_distance_m: float = Field(
+        1.0,
+        ge=0.0,
+        description=(
+            "Guided rounds (robot: guided, person-sim): each new photo was taken for one of "
+            "the previous round's shots (its goals.json), so a pose farther than this (m) "
+            "from every shot, or turned more than sfm.person_shot_heading_deg from each "
+            "near one, is suspect: the photo's pose is estimated again from the matches a "
+            "camera near each shot could have made (as the robot's estimate gates an "
+            "adaptive photo, sfm.max_estimate_deviation_m) and the pose near a shot with "
+            "the most inliers replaces it; a photo with no such pose keeps its own (taken "
+            "away from the guide, it still adds to the map). A person stands about 0.2 m and "
+            "10 deg from a shot (person_sim); 0 turns the shots' check off."
+        ),
+    )
+    person_shot_heading_deg: float = Field(
+        40.0,
+        ge=0.0,
+        description="See sfm.person_shot_distance_m: the heading tolerance (deg).",
+    )
     person_remap_attempts: int = Field(
         2,
         ge=0,

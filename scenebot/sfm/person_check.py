@@ -75,6 +75,17 @@ places photos from their pairs' directions of travel, which a rotation in place 
 have (on the canned folder's three circles, 42 of 45 photos turned in place, it held 118-371
 points of 45 photos, cameras 0.5-1 m off and points 10^9 m out, where incremental mapping
 placed 43 within 5 cm; the office walk: 0 of 30 as mapped, 3 of 31 in global SfM's map)."""
+BLAME_SHARE = 0.5
+"""A photo is registered off when at least this share of its checked pairs are contradicted;
+a contradicted pair neither of whose photos is (each agrees with the map on most of its
+pairs) is a wrong match, not a wrong map: repeated texture or identical objects (the office's
+boxes) verify pairs between different places. Measured on a guided office round (round 0's 74
+photos and round 1's 16 registered into that map, every photo's error from the truth): the 9
+new photos 0.3-59 m off had 67-100 % of their pairs contradicted, the right photos 0-33 %
+(round 0's 31 photos with contradicted pairs: 1 of 19 to 8 of 25), except one right photo
+whose only two pairs were with photos registered off, and three right new photos at 44-56 %
+whose contradicted pairs were with photos registered off (taken out first, a step at a
+time)."""
 MIN_MEDIAN_PAIR_SHARE = 0.3
 """A map whose median checked pair holds less than this share of its inlier matches as one
 3D point fails as a whole: the relative bar (``sfm.person_min_pair_share`` times the
@@ -261,6 +272,25 @@ def contradicted_pairs(
     return bad, {"checked": len(shares), "median_share": median, "threshold": threshold}
 
 
+def blamed_pairs(
+    bad: list[tuple[str, str, int, float]], shares: list[tuple[str, str, int, float]]
+) -> tuple[list[tuple[str, str, int, float]], list[tuple[str, str, int, float]]]:
+    """Split the contradicted pairs ``bad`` into those with a photo registered off (at least
+    :data:`BLAME_SHARE` of its checked pairs, ``shares``, contradicted) and the wrong matches
+    (each photo agrees with the map on most of its pairs)."""
+    checked: dict[str, int] = {}
+    for a, b, *_ in shares:
+        for n in (a, b):
+            checked[n] = checked.get(n, 0) + 1
+    count: dict[str, int] = {}
+    for a, b, *_ in bad:
+        for n in (a, b):
+            count[n] = count.get(n, 0) + 1
+    off = {n for n, c in count.items() if c >= BLAME_SHARE * checked.get(n, c)}
+    blamed = [p for p in bad if p[0] in off or p[1] in off]
+    return blamed, [p for p in bad if not (p[0] in off or p[1] in off)]
+
+
 def fit_plane(C: np.ndarray, seed: int = 0, iterations: int = 10) -> tuple[np.ndarray, float]:
     """Robust plane through points: least median of squares over random triples, then
     Tukey-biweight refinement (scale: the residuals' MAD).
@@ -364,6 +394,8 @@ def check_person_map(
     geometries = pair_geometries(rec, db_path)
     shares = pair_track_shares(rec, db_path, pairs=geometries)
     bad, pair_stats = contradicted_pairs(shares, min_pair_share)
+    bad, wrong_matches = blamed_pairs(bad, shares)
+    pair_stats["wrong_matches"] = len(wrong_matches)
     turned = turned_in_place(geometries)
     pair_stats |= {"verified": len(geometries), "turned_in_place_photos": len(turned)}
     whole = min_pair_share > 0 and bool(shares)

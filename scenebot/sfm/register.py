@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
+from scenebot.geometry import look_rotation
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.features import open_database
 from scenebot.sfm.mapping import (
@@ -86,6 +87,7 @@ def map_new_photos(
     cfg: SfmConfig,
     previous: pycolmap.Reconstruction,
     camera_offset_m: tuple[float, float] | None,
+    shots: list[pycolmap.Rigid3d] | None = None,
 ) -> tuple[MappingResult | None, pycolmap.Reconstruction]:
     """The fast path: the new photos registered into ``previous`` (:func:`register_new_photos`,
     the robot's estimates as second initial guesses, :func:`camera_priors`) and refined
@@ -94,6 +96,8 @@ def map_new_photos(
     Args:
         camera_offset_m: the camera centre in the robot frame (forward, left) (m), as the
             previous map's alignment found it; None: at the robot's position.
+        shots: a guided round's shots (:func:`shot_poses`, the previous map's frame): where
+            a person's new photos were meant to be taken.
 
     Returns:
         The mapping result, or None (logged) when fewer than ``cfg.min_registered_share``
@@ -105,7 +109,7 @@ def map_new_photos(
     priors = camera_priors(
         photos, camera_offset_m, cfg.camera_yaw_deg, float(np.median(heights or [0.0]))
     )
-    reg = register_new_photos(db_path, image_root, names, cfg, previous, priors)
+    reg = register_new_photos(db_path, image_root, names, cfg, previous, priors, shots)
     n_new = len(names) - len(reg.previous_ids)
     # a photo taken out against the robot's estimate is judged, not missed: the incremental
     # mapper would only register it where the estimate says it was not (and the stage would
@@ -181,6 +185,18 @@ def camera_priors(
     return out
 
 
+def shot_poses(goals: list[dict]) -> list[pycolmap.Rigid3d]:
+    """cam_from_world of each shot of a guide (goals.json ``goals``: camera centre x, y, z,
+    heading ``theta``, tilt ``pitch``; no roll), in the frame of the map they were planned
+    on."""
+    out = []
+    for g in goals:
+        rot = look_rotation(float(g["theta"]), float(g.get("pitch", 0.0)))
+        centre = np.array([g["x"], g["y"], g.get("z", 0.0)], float)
+        out.append(pycolmap.Rigid3d(pycolmap.Rotation3d(rot), -rot @ centre))
+    return out
+
+
 def register_new_photos(
     db_path: Path,
     image_root: Path,
@@ -188,6 +204,7 @@ def register_new_photos(
     cfg: SfmConfig,
     previous: pycolmap.Reconstruction,
     priors: dict[str, pycolmap.Rigid3d],
+    shots: list[pycolmap.Rigid3d] | None = None,
 ) -> Registration:
     """Register the photos of ``names`` missing from ``previous`` into a copy of it.
 
@@ -198,6 +215,9 @@ def register_new_photos(
         cfg: sfm settings (pose and triangulation thresholds of the incremental mapper).
         previous: round r-1's model, image ids as in the database.
         priors: photo name -> the robot's estimate of its camera pose (:func:`camera_priors`).
+        shots: the poses a person's photos (no estimate) were meant to be taken at (a
+            guided round's shots, :func:`shot_poses`), checked within
+            ``cfg.person_shot_distance_m`` / ``person_shot_heading_deg``.
 
     Returns:
         The registration (photos that did not register are simply not in the model).
@@ -229,6 +249,8 @@ def register_new_photos(
         Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg),
         mopts.abs_pose_min_num_inliers,
     )
+    guess.shots = list(shots or [])
+    guess.shot_tolerance = Tolerance(cfg.person_shot_distance_m, cfg.person_shot_heading_deg)
     new_ids = _register_loop(mapper, opts, mopts, guess)
     unreachable = _unreachable(
         rec, cache.correspondence_graph, names, previous_ids, new_ids, guess.rejected,
@@ -245,6 +267,8 @@ def register_new_photos(
         "too_few_map_matches": len(unreachable),
         "register_seconds": time.perf_counter() - t0,
     }
+    if guess.shots:
+        stats["shot_checks"] = guess.shot_checks
     return Registration(rec, new_ids, previous_ids, stats, dict(guess.rejected_names), unreachable)
 
 
@@ -337,6 +361,9 @@ class _PriorGuess:
         self.gated = 0
         self.rejected: set[int] = set()
         self.rejected_names: dict[str, str] = {}
+        self.shots: list[pycolmap.Rigid3d] = []
+        self.shot_tolerance = Tolerance(0.0, 0.0)
+        self.shot_checks: dict[str, dict] = {}
 
     def check(self, iid: int, drop_error_px: float, max_error_px: float) -> bool:
         """Hold image ``iid``'s new pose against the robot's estimate: within the
@@ -347,6 +374,9 @@ class _PriorGuess:
         rec = self.mapper.reconstruction
         im = rec.image(iid)
         prior = self.priors.get(im.name)
+        if prior is None and self.shots and self.shot_tolerance.position_m > 0:
+            self._check_against_shots(iid, drop_error_px, max_error_px)
+            return True
         if prior is None or self.tolerance.agrees(im.cam_from_world(), prior):
             self.try_pose(iid, drop_error_px)
             return True
@@ -364,6 +394,46 @@ class _PriorGuess:
             "sfm.max_compass_deviation_deg"
         )
         return False
+
+    def _check_against_shots(self, iid: int, drop_error_px: float, max_error_px: float) -> None:
+        """A person's photo (no robot estimate) against the guide's shots: a pose within
+        ``shot_tolerance`` of a shot stays; otherwise the pose near a shot that its gated
+        matches give (:func:`pose_near_estimate` from each shot), the one with the most
+        inliers, replaces it; with none, the photo keeps its own pose (taken away from
+        the guide). Each decision goes to :attr:`shot_checks` (report.json)."""
+        rec = self.mapper.reconstruction
+        im = rec.image(iid)
+        pose = im.cam_from_world()
+        dist = [float(np.linalg.norm(camera_centre(pose) - camera_centre(s))) for s in self.shots]
+        near = int(np.argmin(dist))
+        row: dict = {"nearest_shot": near, "distance": dist[near], "map_points": im.num_points3D}
+        if any(self.shot_tolerance.agrees(pose, s) for s in self.shots):
+            self.shot_checks[im.name] = row | {"pose": "registered, near a shot"}
+            return
+        _, xy, xyz = map_correspondences(rec, self.graph, iid, every=True)
+        best = None
+        for k, shot in enumerate(self.shots):
+            found = pose_near_estimate(
+                im.camera, shot, xy, xyz, self.shot_tolerance, max_error_px, self.min_inliers,
+                with_inliers=True,
+            )  # fmt: skip
+            if found is not None and (best is None or found[1] > best[2]):
+                best = (k, found[0], found[1])
+        if best is None:
+            self.shot_checks[im.name] = row | {
+                "pose": "registered, near no shot (no pose near a shot from its matches)"
+            }
+            return
+        k, shot_pose, inliers = best
+        moved = float(np.linalg.norm(camera_centre(shot_pose) - camera_centre(pose)))
+        self._set_pose(iid, shot_pose, drop_error_px)
+        self.gated += 1
+        self.shot_checks[im.name] = row | {
+            "pose": f"from its matches near shot {k}",
+            "shot": k,
+            "inliers": inliers,
+            "moved": moved,
+        }
 
     def _gated_pose(
         self, iid: int, prior: pycolmap.Rigid3d, max_error_px: float
@@ -421,12 +491,14 @@ def pose_near_estimate(
     max_error_px: float,
     min_inliers: int,
     attempts: int = 3,
-) -> pycolmap.Rigid3d | None:
+    with_inliers: bool = False,
+):
     """A pose within ``tolerance`` of the robot's estimate from the 2D-3D matches it allows
     (:func:`gate_correspondences`): RANSAC (``max_error_px``), and while its pose lies
     outside the tolerances, again without that pose's inliers (a repeated pattern gives
     several consistent poses, one per copy; the estimate says which copy), ``attempts``
-    times at most. None when no pose with ``min_inliers`` inliers lies within them."""
+    times at most. None when no pose with ``min_inliers`` inliers lies within them; with
+    ``with_inliers``, (pose, inlier count)."""
     keep = gate_correspondences(camera, prior, xy, xyz, tolerance.position_m, tolerance.heading_deg)
     xy, xyz = np.asarray(xy)[keep], np.asarray(xyz)[keep]
     est = pycolmap.AbsolutePoseEstimationOptions()
@@ -439,7 +511,8 @@ def pose_near_estimate(
         if ans is None or ans["num_inliers"] < min_inliers:
             return None
         if tolerance.agrees(ans["cam_from_world"], prior):
-            return ans["cam_from_world"]
+            pose = ans["cam_from_world"]
+            return (pose, int(ans["num_inliers"])) if with_inliers else pose
         out = ~np.asarray(ans["inlier_mask"], bool)
         xy, xyz = xy[out], xyz[out]
     return None

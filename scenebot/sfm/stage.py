@@ -54,7 +54,12 @@ from scenebot.sfm.photos import (
     photos_from_folder,
 )
 from scenebot.sfm.place import place_left_out_photos
-from scenebot.sfm.register import camera_xy, global_refinement_checks, map_new_photos
+from scenebot.sfm.register import (
+    camera_xy,
+    global_refinement_checks,
+    map_new_photos,
+    shot_poses,
+)
 
 log = logging.getLogger(__name__)
 
@@ -71,12 +76,16 @@ class SfmInputs:
         capture_dirs: ``round_{k}/capture`` folders of rounds 0..r, in order (robot rounds).
         photo_folder: bring-your-own photos (``robot: photos``) instead of capture folders.
         previous_model: round r-1's ``sfm`` folder to continue from, or ``None``.
+        shots_json: a guided round's shots: round r-1's ``goals.json`` (in ``previous_model``'s
+            frame), where the person's new photos were meant to be taken
+            (``sfm.person_shot_distance_m``), or ``None``.
     """
 
     database: Path
     capture_dirs: list[Path] = field(default_factory=list)
     photo_folder: Path | None = None
     previous_model: Path | None = None
+    shots_json: Path | None = None
 
 
 @dataclass
@@ -310,6 +319,7 @@ class _Session:
         capture_dirs: the capture folders read (their logs may hold a person's tape
             measurement: :func:`~scenebot.sfm.photos.logged_known_distance`).
         timings: seconds per step (report.json ``timings_s``).
+        shots: a guided round's shots, cam_from_world in ``previous``'s frame.
     """
 
     cfg: SfmConfig
@@ -323,6 +333,7 @@ class _Session:
     person: bool = False
     timings: dict[str, float] = field(default_factory=dict)
     capture_dirs: list[Path] = field(default_factory=list)
+    shots: list[pycolmap.Rigid3d] = field(default_factory=list)
 
 
 def _remap_while_circles_disagree(
@@ -540,7 +551,22 @@ def _open_session(cfg: SfmConfig, inputs: SfmInputs, person: bool = False) -> _S
         person=inputs.photo_folder is not None or person,
         timings=timings,
         capture_dirs=[Path(d) for d in inputs.capture_dirs],
+        shots=_read_shots(inputs.shots_json) if previous is not None else [],
     )
+
+
+def _read_shots(shots_json: Path | None) -> list[pycolmap.Rigid3d]:
+    """The shots of a guided round's guide (``goals.json``; none given: none)."""
+    if shots_json is None:
+        return []
+    try:
+        goals = json.loads(Path(shots_json).read_text(encoding="utf-8")).get("goals", [])
+        return shot_poses(goals)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SfmError(
+            f"{shots_json}: cannot read the guide's shots ({exc}); run the previous round's "
+            "goals stage again"
+        ) from exc
 
 
 def _read_previous(previous_model: Path | None) -> pycolmap.Reconstruction | None:
@@ -602,8 +628,9 @@ def _map(s: _Session) -> MappingResult:
     mres, start = None, s.previous
     if s.previous is not None and cfg.incremental and cfg.register_new_photos:
         mres, start = map_new_photos(
-            s.db_path, s.root, s.photos, cfg, s.previous, _previous_camera_offset(s)
-        )
+            s.db_path, s.root, s.photos, cfg, s.previous,
+            None if s.person else _previous_camera_offset(s), shots=s.shots,
+        )  # fmt: skip
     if mres is None:
         mres = map_photos(
             s.db_path, s.root, s.names, s.work / "mapping", cfg, start, s.fix_focal,
