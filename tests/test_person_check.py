@@ -198,3 +198,36 @@ def test_a_pair_contradicted_for_neither_photo_is_a_wrong_match():
     assert sorted(bad) == sorted([wrong, *off])
     blamed, wrong_matches = blamed_pairs(bad, shares)
     assert sorted(blamed) == sorted(off) and wrong_matches == [wrong]
+
+
+def test_only_the_new_photos_of_a_registered_round_are_left_out_without_mapping_again(synthetic):
+    """A round whose new photos were registered into the previous map (poses held): when
+    the check names only new photos (a pair with an old photo blames the new one), they are
+    left out without mapping everything again; a pair of two old photos, a map failing as
+    a whole, or a map made from scratch, is mapped again as before."""
+    from types import SimpleNamespace
+
+    from scenebot.sfm.person_check import PersonCheck
+    from scenebot.sfm.stage import _only_new_photos_named
+
+    rec, _ = synthetic
+    names = [rec.image(i).name for i in sorted(rec.reg_image_ids())]
+    previous = pycolmap.Reconstruction(rec)
+    for iid in sorted(previous.reg_image_ids())[-2:]:
+        previous.deregister_frame(previous.image(iid).frame_id)
+    old, new = names[:6], names[6:]
+    s = SimpleNamespace(previous=previous)
+    fast = SimpleNamespace(mode="registered")
+
+    def check(pairs, whole=False):
+        return PersonCheck(False, ["x"], [(a, b, 40, 0.0) for a, b in pairs], whole=whole)
+
+    assert _only_new_photos_named(s, fast, check([(old[0], new[0]), (new[0], new[1])]))
+    assert _only_new_photos_named(s, SimpleNamespace(mode="registered+global"),
+                                  check([(new[1], old[2])]))  # fmt: skip
+    assert not _only_new_photos_named(s, fast, check([(old[0], old[1])]))
+    assert not _only_new_photos_named(s, fast, check([(old[0], new[0])], whole=True))
+    assert not _only_new_photos_named(s, SimpleNamespace(mode="incremental"),
+                                      check([(old[0], new[0])]))  # fmt: skip
+    assert not _only_new_photos_named(SimpleNamespace(previous=None), fast,
+                                      check([(old[0], new[0])]))  # fmt: skip

@@ -18,8 +18,10 @@ small. Two things still contradict such a map:
    pair's contradicts the map, and a map whose median pair is below
    :data:`MIN_MEDIAN_PAIR_SHARE` fails as a whole. Verified pairs can also be wrong: in the
    canned office folder (a robot's circles at 320 x 240) 6 of the 12 pairs its right part
-   does not hold have 7-37 % of their inliers on the true geometry, and the stage leaves
-   out photos for them (38 of 45 kept, the two registered 3.5 m off among those left out).
+   does not hold have 7-37 % of their inliers on the true geometry, and identical objects
+   (the office's boxes) verify pairs between different places: a contradicted pair blames
+   a photo only when most of that photo's pairs are contradicted (:data:`BLAME_SHARE`,
+   :func:`blamed_pairs`); the others are wrong matches, counted and not held against the map.
 2. **The eye-height plane** (:func:`height_plane`). The round-0 photos of a guided campaign
    are a walk around the room, the person standing: their camera centres lie within a few
    centimetres of one horizontal plane (``sfm.person_height_std_m``). A robust plane fit

@@ -861,6 +861,22 @@ def _person_remaps(s: _Session, check: PersonCheck, registered: int):
         )  # fmt: skip
 
 
+def _only_new_photos_named(s: _Session, mres: MappingResult, check: PersonCheck) -> bool:
+    """Whether the check names only photos new this round, in a map that registered them
+    into the previous round's (the fast path: the previous photos' poses held; that map
+    passed its check), and does not fail the map as a whole: the new photos are what is
+    wrong, and mapping everything again would risk the map that passed."""
+    if s.previous is None or not mres.mode.startswith("registered") or check.whole:
+        return False
+    old = {s.previous.image(i).name for i in s.previous.reg_image_ids()}
+    named = check.named_photos
+    if check.contradicted:  # a pair names both photos; the new one is to blame
+        named = set(check.off_plane) | {
+            n for a, b, *_ in check.contradicted for n in (a, b) if {a, b} <= old or n not in old
+        }
+    return bool(named) and not (named & old)
+
+
 def _check_person_map(
     s: _Session, mres: MappingResult, alignment: Alignment
 ) -> tuple[MappingResult, Alignment, dict]:
@@ -886,7 +902,14 @@ def _check_person_map(
     check = _person_check(s, mres, alignment)
     runs = [_check_record("as mapped", mres, check)]
     best, kept = (mres, alignment, check), 0
-    if not check.ok:
+    if not check.ok and _only_new_photos_named(s, mres, check):
+        log.warning(
+            "the person's map fails its check for new photos only (the previous map passed "
+            "it and its poses were held): leaving them out, not mapping again: %s",
+            "; ".join(check.problems),
+        )
+        runs.append({"mapping": "again", "skipped": "only new photos named"})
+    elif not check.ok:
         log.warning("the person's map fails its check: %s", "; ".join(check.problems))
         registered = mres.reconstruction.num_reg_images()
         for how, remap in _person_remaps(s, check, registered):
