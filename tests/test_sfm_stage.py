@@ -388,13 +388,9 @@ def test_a_wrong_registration_is_corrected_from_the_robots_estimate(round0, roun
     assert len(new) == 24 and max(new.values()) < 0.02
 
 
-def test_a_registration_far_from_the_robots_estimate_is_estimated_again(
-    round0, round1, monkeypatch
-):
-    """Every other new photo comes out of RANSAC 1.5 m along the wall (a repeated texture's
-    other copy: beyond sfm.max_estimate_deviation_m of the robot's estimate): its pose is
-    estimated again from the matches the estimate allows, and every new photo ends within
-    2 cm of the truth; the fast path needs no fallback."""
+def _register_every_other_on_a_copy(monkeypatch, shift_m=1.5):
+    """Make every other photo the fast path registers come out of RANSAC ``shift_m`` along
+    x (a repeated texture's other copy)."""
     import scenebot.sfm.register as register
 
     real = register._register_next
@@ -403,11 +399,21 @@ def test_a_registration_far_from_the_robots_estimate_is_estimated_again(
         iid = real(mapper, mopts, structure_less, skip)
         if iid is not None and iid % 2 == 0:
             frame = mapper.reconstruction.frame(mapper.reconstruction.image(iid).frame_id)
-            shift = pycolmap.Rigid3d(pycolmap.Rotation3d(np.zeros(3)), [1.5, 0.0, 0.0])
+            shift = pycolmap.Rigid3d(pycolmap.Rotation3d(np.zeros(3)), [shift_m, 0.0, 0.0])
             frame.rig_from_world = shift * frame.rig_from_world
         return iid
 
     monkeypatch.setattr(register, "_register_next", copied)
+
+
+def test_a_registration_far_from_the_robots_estimate_is_estimated_again(
+    round0, round1, monkeypatch
+):
+    """Every other new photo comes out of RANSAC 1.5 m along the wall (a repeated texture's
+    other copy: beyond sfm.max_estimate_deviation_m of the robot's estimate): its pose is
+    estimated again from the matches the estimate allows, and every new photo ends within
+    2 cm of the truth; the fast path needs no fallback."""
+    _register_every_other_on_a_copy(monkeypatch)
     base, cap0, out0, _, _ = round0
     report, _, new = _run_round1(base, cap0, round1[0], out0.model_dir, "copied")
     assert report["mapping_mode"] == "registered"
@@ -446,17 +452,7 @@ def test_a_persons_photo_registered_away_from_every_shot_is_estimated_again(
     checked against them."""
     import scenebot.sfm.register as register
 
-    real = register._register_next
-
-    def copied(mapper, mopts, structure_less, skip=frozenset()):
-        iid = real(mapper, mopts, structure_less, skip)
-        if iid is not None and iid % 2 == 0:
-            frame = mapper.reconstruction.frame(mapper.reconstruction.image(iid).frame_id)
-            shift = pycolmap.Rigid3d(pycolmap.Rotation3d(np.zeros(3)), [1.5, 0.0, 0.0])
-            frame.rig_from_world = shift * frame.rig_from_world
-        return iid
-
-    monkeypatch.setattr(register, "_register_next", copied)
+    _register_every_other_on_a_copy(monkeypatch)
     monkeypatch.setattr(register, "camera_priors", lambda *a, **k: {})  # a person: no estimate
     base, cap0, out0, _, _ = round0
     new_names = {n for n in _names(round1_map[1]) if "round_001" in n}

@@ -105,7 +105,8 @@ class GoalsConfig(Settings):
         "goals.min_matchable_points): a person's photo has no robot estimate to register "
         "from, only its matches. Measured on a guided office round (74-photo walk, its "
         "median photo 570 points): shots of 102-1,160 predicted points (min_matchable_points "
-        "alone) put 9 of 17 photos 0.3-59 m off; shots of 400 or more, 1 of 17. 0: off.",
+        "alone) put 9 of 17 photos 0.3-59 m off; shots of 400 or more, 1 of 17. 0 (or "
+        "goals.min_matchable_points 0): off.",
     )
     min_hit_fraction: float = Field(
         0.2,

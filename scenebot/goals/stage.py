@@ -257,8 +257,8 @@ COVERAGE_VERTICES = 20000
 def _person_min_matchable(cfg: GoalsConfig, sfm_dir: Path | None) -> int:
     """The map points a person's shot must be predicted to match: ``goals.min_matchable_points``,
     or ``goals.person_min_matchable_share`` of what the map's median photo observes when
-    more."""
-    if sfm_dir is None or cfg.person_min_matchable_share <= 0:
+    more; ``min_matchable_points`` 0 turns both off."""
+    if sfm_dir is None or cfg.person_min_matchable_share <= 0 or cfg.min_matchable_points <= 0:
         return cfg.min_matchable_points
     import pycolmap
 
