@@ -274,20 +274,22 @@ def contradicted_pairs(
     return bad, {"checked": len(shares), "median_share": median, "threshold": threshold}
 
 
+def pairs_per_photo(pairs: list[tuple[str, str, int, float]]) -> dict[str, int]:
+    """Photo -> how many of ``pairs`` (name_a, name_b, ...) it is in."""
+    out: dict[str, int] = {}
+    for a, b, *_ in pairs:
+        for n in (a, b):
+            out[n] = out.get(n, 0) + 1
+    return out
+
+
 def blamed_pairs(
     bad: list[tuple[str, str, int, float]], shares: list[tuple[str, str, int, float]]
 ) -> tuple[list[tuple[str, str, int, float]], list[tuple[str, str, int, float]]]:
     """Split the contradicted pairs ``bad`` into those with a photo registered off (at least
     :data:`BLAME_SHARE` of its checked pairs, ``shares``, contradicted) and the wrong matches
     (each photo agrees with the map on most of its pairs)."""
-    checked: dict[str, int] = {}
-    for a, b, *_ in shares:
-        for n in (a, b):
-            checked[n] = checked.get(n, 0) + 1
-    count: dict[str, int] = {}
-    for a, b, *_ in bad:
-        for n in (a, b):
-            count[n] = count.get(n, 0) + 1
+    checked, count = pairs_per_photo(shares), pairs_per_photo(bad)
     off = {n for n, c in count.items() if c >= BLAME_SHARE * checked.get(n, c)}
     blamed = [p for p in bad if p[0] in off or p[1] in off]
     return blamed, [p for p in bad if not (p[0] in off or p[1] in off)]
@@ -447,11 +449,7 @@ def check_person_map(
             "no metric scale" if to_frame is None else f"{len(names)} standing photos (< 6)"
         )
     stats = {"pairs": pair_stats, "plane": plane_stats}
-    per_photo: dict[str, int] = {}
-    for a, b, *_ in shares:
-        for n in (a, b):
-            per_photo[n] = per_photo.get(n, 0) + 1
-    return PersonCheck(not problems, problems, bad, off, stats, per_photo, whole)
+    return PersonCheck(not problems, problems, bad, off, stats, pairs_per_photo(shares), whole)
 
 
 def _short(name: str) -> str:

@@ -248,9 +248,9 @@ def register_new_photos(
         cfg.refine_max_error_px,
         Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg),
         mopts.abs_pose_min_num_inliers,
+        shots,
+        Tolerance(cfg.person_shot_distance_m, cfg.person_shot_heading_deg),
     )
-    guess.shots = list(shots or [])
-    guess.shot_tolerance = Tolerance(cfg.person_shot_distance_m, cfg.person_shot_heading_deg)
     new_ids = _register_loop(mapper, opts, mopts, guess)
     unreachable = _unreachable(
         rec, cache.correspondence_graph, names, previous_ids, new_ids, guess.rejected,
@@ -342,6 +342,8 @@ class _PriorGuess:
         gated: how many photos took the pose estimated from their gated matches.
         rejected: image ids taken out again (no pose within the tolerances).
         rejected_names: their names -> why.
+        shots, shot_tolerance: a guided round's shots, for the photos without an estimate
+            (:meth:`_check_against_shots`); shot_checks: its decision per photo.
     """
 
     def __init__(
@@ -352,6 +354,8 @@ class _PriorGuess:
         max_error_px: float,
         tolerance: Tolerance | None = None,
         min_inliers: int = 30,
+        shots: list[pycolmap.Rigid3d] | None = None,
+        shot_tolerance: Tolerance | None = None,
     ) -> None:
         self.mapper, self.graph, self.priors = mapper, graph, priors
         self.max_error_px = max_error_px
@@ -361,8 +365,8 @@ class _PriorGuess:
         self.gated = 0
         self.rejected: set[int] = set()
         self.rejected_names: dict[str, str] = {}
-        self.shots: list[pycolmap.Rigid3d] = []
-        self.shot_tolerance = Tolerance(0.0, 0.0)
+        self.shots = list(shots or [])  # a person's photos: where they were meant to be
+        self.shot_tolerance = shot_tolerance or Tolerance(0.0, 0.0)
         self.shot_checks: dict[str, dict] = {}
 
     def check(self, iid: int, drop_error_px: float, max_error_px: float) -> bool:

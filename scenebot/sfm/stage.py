@@ -44,7 +44,12 @@ from scenebot.sfm.mapping import (
     refine_globally,
 )
 from scenebot.sfm.pairs import PairPrior, select_pairs
-from scenebot.sfm.person_check import TURNED_SHARE_NO_GLOBAL, PersonCheck, check_person_map
+from scenebot.sfm.person_check import (
+    TURNED_SHARE_NO_GLOBAL,
+    PersonCheck,
+    check_person_map,
+    pairs_per_photo,
+)
 from scenebot.sfm.person_frame import person_frame_transform
 from scenebot.sfm.photos import (
     Photo,
@@ -869,11 +874,10 @@ def _only_new_photos_named(s: _Session, mres: MappingResult, check: PersonCheck)
     if s.previous is None or not mres.mode.startswith("registered") or check.whole:
         return False
     old = {s.previous.image(i).name for i in s.previous.reg_image_ids()}
-    named = check.named_photos
-    if check.contradicted:  # a pair names both photos; the new one is to blame
-        named = set(check.off_plane) | {
-            n for a, b, *_ in check.contradicted for n in (a, b) if {a, b} <= old or n not in old
-        }
+    # a pair of an old and a new photo blames the new one; a pair of two old photos, both
+    named = set(check.off_plane) | {
+        n for a, b, *_ in check.contradicted for n in (a, b) if n not in old or {a, b} <= old
+    }
     return bool(named) and not (named & old)
 
 
@@ -997,11 +1001,7 @@ def _leave_out_named(
                 for n, r in check.off_plane.items()
             }
         elif check.contradicted:
-            count: dict[str, int] = {}
-            for a, b, *_ in check.contradicted:
-                for n in (a, b):
-                    count[n] = count.get(n, 0) + 1
-
+            count = pairs_per_photo(check.contradicted)
             checked = check.pairs_per_photo
             worst = max(
                 count,
