@@ -109,6 +109,17 @@ def view_direction(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
     return np.array([cp * np.cos(heading_rad), cp * np.sin(heading_rad), np.sin(pitch_rad)])
 
 
+def mount_pitch(R_cam_from_world: np.ndarray) -> float:
+    """The tilt (rad, up positive) of a robot's camera on its mount, from a map: the median
+    pitch of the photos' optical axes (``R_cam_from_world`` (N, 3, 3); the map frame's z is
+    up). A robot's camera does not tilt as the robot drives, so every photo shows the mount;
+    0 for no photo."""
+    R = np.asarray(R_cam_from_world, np.float64).reshape(-1, 3, 3)
+    if not len(R):
+        return 0.0
+    return float(np.median(np.arcsin(np.clip(R[:, 2, 2], -1.0, 1.0))))
+
+
 def planar_cam_from_world(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """Rotation and translation of horizontal cameras at height z = 0 (``look_rotation`` with
     no pitch, for many cameras at once).

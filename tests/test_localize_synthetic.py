@@ -117,6 +117,29 @@ def test_pose_off_the_camera_plane_or_tilted_is_rejected(room_map):
     assert localize(img, lmap, unchecked).ok
 
 
+def test_the_camera_pitch_to_hold_a_fix_to_is_the_maps(room_map):
+    """localize.camera_pitch_deg: map (the default): a fix must tilt as the map's photos do
+    (LocalizationMap.mount_pitch_deg, the median pitch of the map's photos): a level photo
+    fits a level map and not a map of a camera tilted up 10 deg; a photo tilted up 10 deg
+    fits that map and not the level one."""
+    from scenebot.geometry import look_rotation
+
+    room, desc, cam = room_map
+    x, y, th = QUERIES[0]
+    level = room.render(camera_rotation(th), np.array([x, y, 0.0]))
+    up = room.render(look_rotation(th, math.radians(10.0)), np.array([x, y, 0.0]))
+    level_map, tilted_map = (
+        LocalizationMap(desc, cam),
+        LocalizationMap(desc, cam, mount_pitch_deg=10.0),
+    )
+    assert localize(level, level_map).ok
+    assert localize(level, tilted_map).reason is FailureReason.IMPLAUSIBLE_POSE
+    est = localize(up, tilted_map)
+    assert est.ok and np.linalg.norm(est.center - [x, y, 0.0]) < 0.02
+    assert localize(up, level_map).reason is FailureReason.IMPLAUSIBLE_POSE
+    assert localize(up, level_map, LocalizeConfig(camera_pitch_deg=10.0)).ok
+
+
 def test_a_fix_whose_predicted_error_is_too_large_is_a_failure(room_map):
     """localize.max_position_std_m: the fix says how well its matches determine the centre;
     a bound below that makes it an ``uncertain_pose`` failure, a bound above keeps it."""

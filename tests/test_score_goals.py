@@ -146,6 +146,39 @@ def test_candidates_file(scored_room):
     assert scored_room["summary"]["candidates"] == 300
 
 
+def test_a_robots_candidates_look_as_its_camera_is_mounted(tmp_path):
+    """The map's photos all tilted up 15 deg (a camera mounted pitched): the candidates are
+    that camera in the camera plane (z = 0, pitch 15 deg in candidates.csv, what the goals
+    and the score-validity study read), and the unphotographed east still scores worse."""
+    from scenebot.geometry import tilted_cam_from_world
+
+    root = tmp_path / "office" / "round_001"
+    V, F = syn.room(cell_m=0.5)
+    th = np.deg2rad(np.arange(125, 236, 10))
+    p = np.array([(x, y, a) for x in (-1.5, 0.0, 1.5) for y in (-1.0, 0.8) for a in th])
+    pitch = np.full(len(p), np.radians(15.0))
+    Rt = tilted_cam_from_world(np.c_[p[:, :2], np.zeros(len(p))], p[:, 2], pitch)
+    R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]
+    K = syn.default_intrinsics()
+    rng = np.random.default_rng(2)
+    pts, _ = syn.sample_surface(V, F, 12000, rng)
+    syn.write_colmap_model(root / "sfm", K, R, t, pts, syn.visible_mask(V, F, R, t, K, pts), rng)
+    mo = MeshOutputs(root / "mesh.ply", root / "freespace.json", root / "freespace.npz")
+    run_mesh(MeshConfig(), MeshInputs(root / "sfm"), mo)
+    so = ScoreOutputs(root / "candidates.csv", None)
+    run_score(
+        ScoreConfig(n_candidates=100, width=40, height=30, backend="cpu"),
+        ScoreInputs(root / "sfm", mo.mesh_ply, mo.freespace_npz),
+        so,
+    )
+    cols = read_candidates(so.candidates_csv)
+    assert np.allclose(cols["pitch"], np.radians(15.0), atol=1e-5)
+    assert np.allclose(cols["z"], 0.0)
+    s = cols["score_deg"]
+    east, west = np.cos(cols["theta"]) > 0.5, np.cos(cols["theta"]) < -0.5
+    assert np.nanmean(s[east]) > np.nanmean(s[west]) + 60
+
+
 def test_zero_candidates_file_is_named(scored_room, tmp_path):
     p = tmp_path / "round_007" / "candidates.csv"
     p.parent.mkdir()

@@ -514,6 +514,28 @@ def test_the_robots_estimate_as_a_camera_pose(theta):
     assert np.allclose(pose.rotation.matrix(), R, atol=1e-12)
     assert np.allclose(pose.inverse().translation, c, atol=1e-12)
     assert camera_priors([Photo("b.jpg", Path("b.jpg"))], None, 0.0, 0.0) == {}
+    # a camera tilted up on its mount: the same centre, the map's pitch
+    from scenebot.geometry import look_rotation
+
+    up = camera_priors([photo], (0.10, 0.02), 0.0, room.camera_height_m, pitch_rad=0.2)["a.jpg"]
+    assert np.allclose(up.rotation.matrix(), look_rotation(theta, 0.2), atol=1e-12)
+    assert np.allclose(up.inverse().translation, c, atol=1e-12)
+
+
+def test_the_mount_pitch_is_the_median_pitch_of_the_maps_photos():
+    """mount_pitch: the tilt every photo of a robot's camera shares, whatever the heading;
+    a few photos registered tilted do not move it; no photo: 0."""
+    from scenebot.geometry import look_rotation, mount_pitch
+    from scenebot.sfm.register import map_mount
+
+    rng = np.random.default_rng(0)
+    heads = rng.uniform(-np.pi, np.pi, 40)
+    R = np.array(
+        [look_rotation(h, np.radians(12.0 if k > 4 else -30.0)) for k, h in enumerate(heads)]
+    )
+    assert abs(np.degrees(mount_pitch(R)) - 12.0) < 1e-9
+    assert mount_pitch(np.zeros((0, 3, 3))) == 0.0
+    assert map_mount(pycolmap.Reconstruction()) == (0.0, 0.0)
 
 
 def test_a_pose_on_a_copy_of_a_repeated_pattern_gives_way_to_the_one_near_the_estimate():

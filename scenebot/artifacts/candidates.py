@@ -3,7 +3,8 @@ the score-validity study read.
 
 A candidate is a camera centre x, y, z (m), a heading theta (rad, counter-clockwise from x)
 and a pitch (rad, up positive), roll 0: a robot's candidates have z = 0 (the camera plane of
-its map) and pitch 0; a person's (``robot: photos``) use all five.
+its map) and the pitch of its camera's mount (:func:`scenebot.geometry.mount_pitch`, 0 for a
+level camera); a person's (``robot: photos``) use all five.
 """
 
 from __future__ import annotations

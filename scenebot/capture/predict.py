@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.geometry import read_sparse_map
+from scenebot.geometry import mount_pitch, read_sparse_map
 from scenebot.robot.base import Pose2D
 from scenebot.score.geometry import person_views
 from scenebot.score.matchable import matchable_points
@@ -62,8 +62,7 @@ class MatchPredictor:
         smap = read_sparse_map(sfm_dir)
         self.xyz, self.view_dir, self.view_dist = smap.xyz, smap.view_dir, smap.view_dist
         self.intr = smap.intrinsics[0]
-        forward = smap.R[:, 2, :]  # each photo's optical axis in the map
-        self.pitch = float(np.median(np.arcsin(np.clip(forward[:, 2], -1.0, 1.0))))
+        self.pitch = mount_pitch(smap.R)
         self.height = float(np.median(smap.centres[:, 2]))
         self.match_angle_deg = match_angle_deg
         self.match_scale_ratio = match_scale_ratio

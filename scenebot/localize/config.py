@@ -97,10 +97,12 @@ class LocalizeConfig(Settings):
     max_height_dev_m: float = Field(
         0.05, gt=0, description="Allowed camera height deviation from camera_plane_z_m (m)."
     )
-    camera_pitch_deg: float | None = Field(
-        0.0,
+    camera_pitch_deg: float | Literal["map"] | None = Field(
+        "map",
         description="The camera's pitch on the robot (deg, positive up); a pose whose optical "
-        "axis pitch or whose roll is off by more than max_tilt_deg is rejected. None: no check.",
+        "axis pitch or whose roll is off by more than max_tilt_deg is rejected. `map`: the "
+        "median pitch of the map's photos (the mount as the map measured it; a level camera: "
+        "0). None: no check.",
     )
     max_tilt_deg: float = Field(
         1.0,

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenebot.geometry import mount_pitch
 from scenebot.localize.config import LocalizeConfig
 from scenebot.localize.dlt import position_std_m, ransac_dlt_pose
 from scenebot.localize.features import extract_sift, load_gray
@@ -148,6 +149,8 @@ class LocalizationMap:
         camera: the map's ``pycolmap.Camera`` (intrinsics of the robot's camera).
         index: a prebuilt index (built from ``descriptors`` if None).
         cfg: localization settings (index parameters).
+        mount_pitch_deg: the median pitch of the map's photos (deg; the camera's mount,
+            :func:`scenebot.geometry.mount_pitch`): ``localize.camera_pitch_deg: map``.
     """
 
     def __init__(
@@ -156,10 +159,12 @@ class LocalizationMap:
         camera,
         index: DescriptorIndex | None = None,
         cfg: LocalizeConfig | None = None,
+        mount_pitch_deg: float = 0.0,
     ):
         cfg = cfg or LocalizeConfig()
         self.descriptors = descriptors
         self.camera = camera
+        self.mount_pitch_deg = float(mount_pitch_deg)
         self.index = index or DescriptorIndex(
             descriptors.descriptors, cfg.flann_trees, cfg.flann_checks
         )
@@ -191,16 +196,19 @@ class LocalizationMap:
         cams_file = sfm_dir / "cameras.bin"
         if not cams_file.exists():
             raise FileNotFoundError(f"{cams_file}: missing; run the sfm stage for this round")
-        cams = pycolmap.Reconstruction(str(sfm_dir)).cameras
+        rec = pycolmap.Reconstruction(str(sfm_dir))
+        cams = rec.cameras
         if not cams:
             raise ValueError(f"{cams_file}: no camera in the model")
+        rot = [rec.image(i).cam_from_world().rotation.matrix() for i in rec.reg_image_ids()]
+        pitch = math.degrees(mount_pitch(np.array(rot).reshape(-1, 3, 3)))
         camera = cams[min(cams)]
         if cache and cache_file is None:
             cache_file = sfm_dir / "point_descriptors.flann"
         if not cache:
             cache_file = None
         index = DescriptorIndex.cached(desc, cache_file, cfg.flann_trees, cfg.flann_checks)
-        return LocalizationMap(desc, camera, index, cfg)
+        return LocalizationMap(desc, camera, index, cfg, mount_pitch_deg=pitch)
 
 
 def _undistorted_pinhole(camera, xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
@@ -322,7 +330,7 @@ def localize(
             FailureReason.TOO_FEW_INLIERS, len(kps), len(matches), n_inl, timings
         )
     est = PoseEstimate(R, t, f, len(kps), len(matches), n_inl, rmse, cfg.method, timings, std)
-    if not plausible_robot_camera(est, cfg):
+    if not plausible_robot_camera(est, cfg, loc_map.mount_pitch_deg):
         return LocalizationFailure(
             FailureReason.IMPLAUSIBLE_POSE, len(kps), len(matches), n_inl, timings, est
         )
@@ -333,9 +341,12 @@ def localize(
     return est
 
 
-def plausible_robot_camera(est: PoseEstimate, cfg: LocalizeConfig) -> bool:
+def plausible_robot_camera(
+    est: PoseEstimate, cfg: LocalizeConfig, mount_pitch_deg: float = 0.0
+) -> bool:
     """Whether a pose fits a camera on a planar robot: centre near the camera plane, optical
-    axis at the configured pitch, no roll (see the ``LocalizeConfig`` fields)."""
+    axis at the configured pitch (``map``: ``mount_pitch_deg``, the map's), no roll (see the
+    ``LocalizeConfig`` fields)."""
     if (
         cfg.camera_plane_z_m is not None
         and abs(float(est.center[2]) - cfg.camera_plane_z_m) > cfg.max_height_dev_m
@@ -345,7 +356,8 @@ def plausible_robot_camera(est: PoseEstimate, cfg: LocalizeConfig) -> bool:
         # rows of R: camera x (right), y (down), z (forward) axes in the map frame (z up)
         pitch = math.degrees(math.asin(float(np.clip(est.R[2, 2], -1.0, 1.0))))
         roll = math.degrees(math.asin(float(np.clip(est.R[0, 2], -1.0, 1.0))))
-        if abs(pitch - cfg.camera_pitch_deg) > cfg.max_tilt_deg or abs(roll) > cfg.max_tilt_deg:
+        want = mount_pitch_deg if cfg.camera_pitch_deg == "map" else cfg.camera_pitch_deg
+        if abs(pitch - want) > cfg.max_tilt_deg or abs(roll) > cfg.max_tilt_deg:
             return False
     return True
 

@@ -40,18 +40,24 @@ def pack_views(R: np.ndarray, t: np.ndarray, intr: Intrinsics | list[Intrinsics]
     return np.concatenate([R.reshape(n, 9), t, C, K], axis=1)
 
 
-def candidate_views(poses: np.ndarray, intr: Intrinsics) -> np.ndarray:
-    """Packed views of planar candidate poses.
+def candidate_views(poses: np.ndarray, intr: Intrinsics, pitch: float = 0.0) -> np.ndarray:
+    """Packed views of planar candidate poses: a robot's camera in the camera plane (z = 0),
+    tilted up by its mount's ``pitch`` (rad; :func:`~scenebot.geometry.mount_pitch`).
 
     Args:
         poses: (N, 3) candidate poses (x m, y m, theta rad).
         intr: virtual camera intrinsics.
+        pitch: the camera's tilt on the robot (rad, up positive).
 
     Returns:
         (N, 19) float64 packed views.
     """
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    Rt = planar_cam_from_world(poses[:, 0], poses[:, 1], poses[:, 2])
+    if pitch == 0.0:
+        Rt = planar_cam_from_world(poses[:, 0], poses[:, 1], poses[:, 2])
+    else:
+        xyz = np.column_stack([poses[:, :2], np.zeros(len(poses))])
+        Rt = tilted_cam_from_world(xyz, poses[:, 2], np.full(len(poses), pitch))
     return pack_views(Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:], intr)
 
 

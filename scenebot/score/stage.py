@@ -13,7 +13,7 @@ from scenebot.artifacts import round_name
 from scenebot.artifacts.candidates import write_candidates
 from scenebot.artifacts.freespace import FreeSpace, FreeVolume
 from scenebot.artifacts.mesh import MeshError, check_mesh, decimate, read_mesh
-from scenebot.geometry import read_sparse_map
+from scenebot.geometry import mount_pitch, read_sparse_map
 from scenebot.score.candidates import sample_candidates, sample_person_candidates
 from scenebot.score.config import ScoreConfig
 from scenebot.score.geometry import candidate_views, person_views
@@ -90,9 +90,13 @@ def run(cfg: ScoreConfig, inputs: ScoreInputs, outputs: ScoreOutputs, person: bo
         views = person_views(poses, scorer.intr)
     else:
         fs = FreeSpace.load(inputs.freespace_npz)
-        poses = sample_candidates(fs, cfg.n_candidates, rng, where)
+        planar = sample_candidates(fs, cfg.n_candidates, rng, where)
         scorer = make_scorer(cfg, V, F, smap, where)
-        views = candidate_views(poses, scorer.intr)
+        # the robot's camera as its mount holds it: the map's photos say how it tilts
+        pitch = mount_pitch(smap.R)
+        views = candidate_views(planar, scorer.intr, pitch)
+        n = len(planar)
+        poses = np.column_stack([planar[:, :2], np.zeros(n), planar[:, 2], np.full(n, pitch)])
     t0 = time.perf_counter()
     res = scorer.score_views(views)
     dt = time.perf_counter() - t0

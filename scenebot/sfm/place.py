@@ -21,7 +21,6 @@ import logging
 import time
 from pathlib import Path
 
-import numpy as np
 import pycolmap
 
 from scenebot.sfm.config import SfmConfig
@@ -39,6 +38,7 @@ from scenebot.sfm.register import (
     camera_priors,
     images_of,
     map_correspondences,
+    map_mount,
     points_of,
     pose_near_estimate,
 )
@@ -84,8 +84,8 @@ def place_left_out_photos(
     todo = [p for p in photos if p.name in dropped and p.localization is not None]
     if not todo or rec.num_reg_images() < 2:
         return stats | {"seconds": time.perf_counter() - t0}
-    heights = [rec.image(i).projection_center()[2] for i in rec.reg_image_ids()]
-    priors = camera_priors(todo, camera_offset_m, cfg.camera_yaw_deg, float(np.median(heights)))
+    height, pitch = map_mount(rec)
+    priors = camera_priors(todo, camera_offset_m, cfg.camera_yaw_deg, height, pitch)
     names = [p.name for p in photos]
     with open_database(db_path) as db:
         cache_opts = pycolmap.DatabaseCacheOptions()

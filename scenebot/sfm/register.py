@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from scenebot.geometry import look_rotation
+from scenebot.geometry import look_rotation, mount_pitch
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.features import open_database
 from scenebot.sfm.mapping import (
@@ -105,10 +105,8 @@ def map_new_photos(
     """
     t0 = time.perf_counter()
     names = [p.name for p in photos]
-    heights = [previous.image(i).projection_center()[2] for i in previous.reg_image_ids()]
-    priors = camera_priors(
-        photos, camera_offset_m, cfg.camera_yaw_deg, float(np.median(heights or [0.0]))
-    )
+    height, pitch = map_mount(previous)
+    priors = camera_priors(photos, camera_offset_m, cfg.camera_yaw_deg, height, pitch)
     reg = register_new_photos(db_path, image_root, names, cfg, previous, priors, shots)
     n_new = len(names) - len(reg.previous_ids)
     # a photo taken out against the robot's estimate is judged, not missed: the incremental
@@ -167,22 +165,33 @@ def camera_priors(
     camera_offset_m: tuple[float, float] | None,
     camera_yaw_deg: float,
     height_m: float,
+    pitch_rad: float = 0.0,
 ) -> dict[str, pycolmap.Rigid3d]:
     """Photo name -> camera pose (cam_from_world, robot frame) where the robot's own
-    estimate (``localization``) puts it: a level camera at the robot's heading plus
-    ``camera_yaw_deg``, its centre ``camera_offset_m`` (forward, left) from the robot's
-    position at height ``height_m``. Photos without an estimate are left out."""
+    estimate (``localization``) puts it: a camera at the robot's heading plus
+    ``camera_yaw_deg``, tilted up by its mount's ``pitch_rad`` (the map's,
+    :func:`~scenebot.geometry.mount_pitch`), its centre ``camera_offset_m`` (forward, left)
+    from the robot's position at height ``height_m``. Photos without an estimate are left
+    out."""
     out: dict[str, pycolmap.Rigid3d] = {}
     for p in photos:
         if p.localization is None:
             continue
         centre = np.r_[camera_xy(p.localization, camera_offset_m), height_m]
-        h = p.localization[2] + math.radians(camera_yaw_deg)
-        view = np.array([math.cos(h), math.sin(h), 0.0])
-        right = np.array([math.sin(h), -math.cos(h), 0.0])
-        rot = np.stack([right, [0.0, 0.0, -1.0], view])  # rows: camera x, y (down), z
+        rot = look_rotation(p.localization[2] + math.radians(camera_yaw_deg), pitch_rad)
         out[p.name] = pycolmap.Rigid3d(pycolmap.Rotation3d(rot), -rot @ centre)
     return out
+
+
+def map_mount(rec: pycolmap.Reconstruction) -> tuple[float, float]:
+    """The camera plane's height and the mount's pitch (rad) of a robot's map: the median
+    height of its camera centres and the median pitch of its photos (0, 0 for no photo)."""
+    ids = list(rec.reg_image_ids())
+    if not ids:
+        return 0.0, 0.0
+    heights = [rec.image(i).projection_center()[2] for i in ids]
+    rot = np.array([rec.image(i).cam_from_world().rotation.matrix() for i in ids])
+    return float(np.median(heights)), mount_pitch(rot)
 
 
 def shot_poses(goals: list[dict]) -> list[pycolmap.Rigid3d]:
