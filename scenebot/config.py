@@ -629,8 +629,17 @@ def _message(err: dict) -> str:
     return f"got {value!r}; {msg}"
 
 
+_UNION_TAGS = ("float", "int", "str", "bool", "none", "literal[")
+"""How pydantic names the members of a union in an error's location (``camera_pitch_deg``'s
+``float`` and ``literal['map']``): not keys of the configuration."""
+
+
 def _key(loc: tuple) -> str:
-    return ".".join(str(p) for p in loc if not str(p).startswith("function-after"))
+    return ".".join(
+        str(p)
+        for p in loc
+        if not str(p).startswith("function-after") and not str(p).startswith(_UNION_TAGS)
+    )
 
 
 def _report(problems: dict[str, str], source: str) -> ConfigError:
@@ -645,6 +654,13 @@ def _problems(exc: ValidationError) -> dict[str, str]:
     for err in exc.errors():
         key = _key(err["loc"])
         msg = _message(err).removeprefix(f"{key}: ") if key else _message(err)
+        if (
+            key in problems
+            and err["loc"][-1:] != ()
+            and str(err["loc"][-1]).startswith(_UNION_TAGS)
+        ):
+            # another member of a union (a number or `map`): what else the key accepts
+            problems[key] += "; or " + msg.split("; ", 1)[-1]
         problems.setdefault(key, msg)  # the first error of each key
     return problems
 
