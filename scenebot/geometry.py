@@ -81,6 +81,19 @@ def look_rotation(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
     return np.stack([right, down, fwd])
 
 
+def orientation_rotation(heading_rad: float, pitch_rad: float, roll_rad: float) -> np.ndarray:
+    """cam_from_world rotation of a camera looking along ``heading_rad`` (counter-clockwise
+    from world +x), tilted up by ``pitch_rad`` and rolled by ``roll_rad`` about its optical
+    axis: how a phone's orientation sensors (compass and accelerometer) describe it.
+
+    Returns:
+        (3, 3) rotation whose rows are the camera's x (right), y (down), z (forward) axes.
+    """
+    c, s = np.cos(roll_rad), np.sin(roll_rad)
+    roll = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return roll @ look_rotation(heading_rad, pitch_rad)
+
+
 def similarity_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Similarity ``dst ~ s R src + t`` by least squares (Umeyama 1991).
 

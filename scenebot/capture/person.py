@@ -247,7 +247,9 @@ def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
     if sim_log.is_file():
         for rec in read_log(sim_log):
             if rec.get("image"):
-                extra[rec["image"]] = {k: rec[k] for k in ("truth", "aimed_shot") if k in rec}
+                extra[rec["image"]] = {
+                    k: rec[k] for k in ("orientation", "truth", "aimed_shot") if k in rec
+                }
     return _take_in(cfg, capture_dir, round_index, files, inbox, extra, guide)
 
 
@@ -282,7 +284,7 @@ def run_perimeter_round(cfg: Config, capture_dir: Path) -> dict:
     (:func:`~scenebot.robot.person_sim.perimeter_walk`), each photo taken with the person's
     error, logged with its truth; the session record holds the tape measurement between
     ``person_sim.tape_photos`` (``known_distance``: the map's metric scale)."""
-    from scenebot.robot.person_sim import perimeter_walk
+    from scenebot.robot.person_sim import orientation_record, perimeter_walk
 
     capture_dir = Path(capture_dir)
     ps = cfg.person_sim
@@ -299,8 +301,12 @@ def run_perimeter_round(cfg: Config, capture_dir: Path) -> dict:
                 image = f"images/r000_{i:04d}.jpg"
                 truth = person.take(pose, capture_dir / image)
                 taken.append((image, pose))
-                clog.write({"type": "photo", "t": float(i), "index": i, "image": image,
-                            "sha256": sha256_of(capture_dir / image), "truth": truth})  # fmt: skip
+                rec = {"type": "photo", "t": float(i), "index": i, "image": image,
+                       "sha256": sha256_of(capture_dir / image)}  # fmt: skip
+                orientation = orientation_record(person, pose)
+                if orientation is not None:
+                    rec["orientation"] = orientation
+                clog.write(rec | {"truth": truth})
             tape = _tape(person, taken, ps)
             if tape is not None:
                 clog.write({"type": "event", "t": float(len(taken)), "event": "known_distance",
@@ -334,7 +340,7 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
     attempt's photos in the inbox move to ``capture/superseded/<time>/inbox/``.
     """
     from scenebot.geometry import read_sparse_map
-    from scenebot.robot.person_sim import map_to_world, shot_in_world
+    from scenebot.robot.person_sim import map_to_world, orientation_record, shot_in_world
 
     scene_dir = Path(scene_dir)
     prev = scene_dir / f"round_{round_index - 1:03d}"
@@ -370,6 +376,9 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
                 name = f"person_r{round_index:03d}_{n:03d}.jpg"
                 truth = person.take(shot.taken, inbox / name)
                 truth["aimed"] = rec["aimed"]
+                orientation = orientation_record(person, shot.taken)
+                if orientation is not None:
+                    rec["orientation"] = orientation
                 rec |= {"image": name, "truth": truth}
                 n += 1
             records.append(rec)

@@ -55,6 +55,17 @@ class PersonSimConfig(Settings):
     roll_std_deg: float = Field(
         2.0, ge=0, description="Standard deviation (degrees) of the camera's roll (0 asked)."
     )
+    compass_std_deg: float | None = Field(
+        10.0,
+        ge=0,
+        description="The phone records its orientation with each photo (the capture log's "
+        "`orientation`: compass heading, and pitch and roll from its accelerometer), the "
+        "heading with this standard deviation (deg; a phone's compass indoors: 5-15); null: "
+        "a phone that records none.",
+    )
+    gravity_std_deg: float = Field(
+        1.0, ge=0, description="Standard deviation (deg) of the phone's pitch and roll readings."
+    )
     photos_per_shot: int = Field(
         1,
         ge=1,

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.geometry import Intrinsics, look_rotation, similarity_fit
+from scenebot.geometry import Intrinsics, orientation_rotation, similarity_fit
 from scenebot.jpeg import store_photo, write_jpeg
 from scenebot.robot.person_config import PersonSimConfig
 from scenebot.scene.mesh import SceneMesh
@@ -61,10 +61,7 @@ class ShotPose:
 
     def rotation(self) -> np.ndarray:
         """(3, 3) cam_from_world rotation (x right, y down, z forward)."""
-        R = look_rotation(self.heading, self.pitch)
-        c, s = math.cos(self.roll), math.sin(self.roll)
-        roll = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return roll @ R
+        return orientation_rotation(self.heading, self.pitch, self.roll)
 
 
 @dataclass
@@ -98,6 +95,9 @@ class SimPerson:
         self.cfg = cfg
         self.camera = camera
         self.rng = np.random.default_rng(seed)
+        # the phone's sensors draw from their own stream: the person's other errors stay the
+        # same with or without them
+        self.sensor_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         lo, hi = cfg.eye_height_m
         self.eye_height_m = float(np.random.default_rng([eye_seed, 7]).uniform(lo, hi))
         fz = scene.floor_z
@@ -222,6 +222,22 @@ class SimPerson:
             ),
         )  # fmt: skip
         return truth_record(pose)
+
+
+def orientation_record(person: SimPerson, pose: ShotPose) -> dict | None:
+    """What the person's phone records of its orientation with a photo (the capture log's
+    ``orientation``): the compass heading with ``person_sim.compass_std_deg`` of error, the
+    pitch and roll from its accelerometer with ``gravity_std_deg``; None for a phone without
+    them (``compass_std_deg`` null). Degrees, the heading counter-clockwise like the map's."""
+    cfg = person.cfg
+    if cfg.compass_std_deg is None:
+        return None
+    rng = person.sensor_rng
+    return {
+        "heading_deg": math.degrees(pose.heading) + float(rng.normal(0, cfg.compass_std_deg)),
+        "pitch_deg": math.degrees(pose.pitch) + float(rng.normal(0, cfg.gravity_std_deg)),
+        "roll_deg": math.degrees(pose.roll) + float(rng.normal(0, cfg.gravity_std_deg)),
+    }
 
 
 def truth_record(pose: ShotPose) -> dict:

@@ -200,6 +200,19 @@ class SfmConfig(Settings):
             "position is wrong too), named in the log and report.json; 0 turns it off."
         ),
     )
+    orientation_max_deg: float = Field(
+        35.0,
+        ge=0.0,
+        description=(
+            "Photos whose log records the camera's orientation (a phone's compass and "
+            "accelerometer; robot: person-sim): a verified pair whose relative rotation, as "
+            "its matches give it, differs by more than this (deg) from the one the two "
+            "photos' orientations give is not used in mapping (a repeated texture's copy "
+            "elsewhere, seen facing another way; report.json orientation_pairs). 2.5 sigma of "
+            "the difference of two readings of a compass good to 10 deg (14 deg); a pair "
+            "dropped stays out of the scene database. 0 turns it off."
+        ),
+    )
     place_left_out_photos: bool = Field(
         False,
         description=(

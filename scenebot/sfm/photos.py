@@ -50,6 +50,8 @@ class Photo:
             ``None``: its visual fix of this photo, or the last fix carried by odometry.
         localization_fix: ``localization`` is a visual fix of this very photo (the log's
             ``localization_source`` is ``this photo``, or absent).
+        orientation: ``(heading, pitch, roll)`` (deg) the camera's own sensors recorded
+            (a phone's compass and accelerometer: the log's ``orientation``), or ``None``.
         truth: the simulator's true pose record (evaluation only), or ``None``.
         source: where a person's photo was taken in from (the log's ``source``: a file of
             ``photos.folder`` or of the round's inbox), or ``None``.
@@ -67,6 +69,7 @@ class Photo:
     compass_deg: float | None = None
     localization: tuple[float, float, float] | None = None
     localization_fix: bool = False
+    orientation: tuple[float, float, float] | None = None
     truth: dict | None = field(default=None, repr=False)
     source: str | None = None
 
@@ -156,6 +159,16 @@ def _pose3(d: dict | None) -> tuple[float, float, float] | None:
         return None
 
 
+def _orientation(d: dict | None) -> tuple[float, float, float] | None:
+    """The log's ``orientation`` (``heading_deg``, ``pitch_deg``, ``roll_deg``), or None."""
+    if not d:
+        return None
+    try:
+        return float(d["heading_deg"]), float(d["pitch_deg"]), float(d["roll_deg"])
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
 def image_root_of(capture_dirs: list[Path]) -> Path:
     """The image root of capture rounds: the scene folder that holds ``round_*/capture``.
 
@@ -206,6 +219,7 @@ def photos_from_captures(capture_dirs: list[Path]) -> tuple[Path, list[Photo]]:
                     localization=_pose3(rec.get("localization")),
                     localization_fix=_pose3(rec.get("localization")) is not None
                     and rec.get("localization_source", "this photo") == "this photo",
+                    orientation=_orientation(rec.get("orientation")),
                     truth=rec.get("truth"),
                     source=rec.get("source"),
                 )

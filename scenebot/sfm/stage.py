@@ -43,6 +43,7 @@ from scenebot.sfm.mapping import (
     mapping_options,
     refine_globally,
 )
+from scenebot.sfm.orientation import drop_pairs_against_orientation
 from scenebot.sfm.pairs import PairPrior, select_pairs
 from scenebot.sfm.person_check import (
     TURNED_SHARE_NO_GLOBAL,
@@ -480,6 +481,7 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
     t_start = time.perf_counter()
     s = _open_session(cfg, inputs, person)
     features, pairs = _features_and_pairs(s)
+    orientation = _drop_pairs_against_orientation(s)
     s.fix_focal = _focal_fixed(cfg, s.photos)
     mres = _map(s)
     short_round = _check_registered(cfg, mres, len(s.photos), s.previous)
@@ -519,6 +521,8 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
     report["short_round"] = short_round
     if s.person:
         report["person_check"] = person_check
+    if orientation is not None:
+        report["orientation_pairs"] = orientation
     outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
     shutil.rmtree(s.work, ignore_errors=True)
     return report
@@ -609,6 +613,25 @@ def _features_and_pairs(s: _Session) -> tuple[dict, dict]:
     log.info("pairs: %d selected, %d newly matched", len(all_pairs), mt["new"])
     features = {k: ext[k] for k in ("new", "reused", "no_features")}
     return features, {k: len(v) for k, v in pairs.items()} | {"matched_now": mt["new"]}
+
+
+def _drop_pairs_against_orientation(s: _Session) -> dict | None:
+    """A person's photos with the camera's orientation in their log: the verified pairs it
+    contradicts leave the database before mapping (:mod:`scenebot.sfm.orientation`);
+    report.json's ``orientation_pairs``, None when no photo has one."""
+    if not s.person or not any(p.orientation for p in s.photos):
+        return None
+    stats = drop_pairs_against_orientation(
+        s.db_path, s.photos, s.cfg.orientation_max_deg, s.cfg.min_num_matches
+    )
+    s.timings["orientation"] = stats["seconds"]
+    if stats["dropped"]:
+        log.info(
+            "orientation: %d of %d verified pairs of photos with the camera's orientation "
+            "contradict it by more than sfm.orientation_max_deg = %g deg: not used in mapping",
+            stats["dropped"], stats["checked"], s.cfg.orientation_max_deg,
+        )  # fmt: skip
+    return stats
 
 
 def _focal_fixed(cfg: SfmConfig, photos: list[Photo]) -> bool:

@@ -1,0 +1,82 @@
+"""Pairs of photos their cameras' orientation contradicts (scenebot.sfm.orientation), on a
+pycolmap synthetic dataset: every pair verified, the true poses known."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+
+from scenebot.sfm.orientation import drop_pairs_against_orientation, rotation_from_orientation
+from scenebot.sfm.photos import Photo
+
+
+def orientation_of(R: np.ndarray) -> tuple[float, float, float]:
+    """(heading, pitch, roll) (deg) of a cam_from_world rotation, as a phone reads it."""
+    fwd = R[2]
+    h, p = math.atan2(fwd[1], fwd[0]), math.asin(float(np.clip(fwd[2], -1, 1)))
+    roll = R @ rotation_from_orientation((math.degrees(h), math.degrees(p), 0.0)).T
+    return math.degrees(h), math.degrees(p), math.degrees(math.atan2(roll[1, 0], roll[0, 0]))
+
+
+@pytest.fixture()
+def dataset(tmp_path):
+    """Ten photos of 400 points, every pair matched and verified."""
+    opts = pycolmap.SyntheticDatasetOptions()
+    opts.num_rigs, opts.num_cameras_per_rig, opts.num_frames_per_rig = 1, 1, 10
+    opts.num_points3D = 400
+    db_path = tmp_path / "database.db"
+    db = pycolmap.Database.open(str(db_path))
+    rec = pycolmap.synthesize_dataset(opts, db)
+    db.close()
+    return db_path, rec
+
+
+def _verified(db_path: Path) -> int:
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        _, inliers = db.read_two_view_geometry_num_inliers()
+        return int(np.sum(np.asarray(inliers) >= 15))
+    finally:
+        db.close()
+
+
+def test_pairs_whose_rotation_the_orientation_contradicts_leave_the_map(dataset):
+    """Readings 5 deg off keep every pair; two photos whose readings are turned 90 deg (a
+    copy of the texture on another wall) lose their pairs with the eight others, not the
+    one between them (turned alike, they agree); the matches stay."""
+    db_path, rec = dataset
+    rng = np.random.default_rng(0)
+    photos, turned = [], set()
+    for k, iid in enumerate(sorted(rec.reg_image_ids())):
+        im = rec.image(iid)
+        h, p, r = orientation_of(im.cam_from_world().rotation.matrix())
+        if k in (3, 7):
+            h += 90.0
+            turned.add(im.name)
+        reading = (h + rng.normal(0, 5), p + rng.normal(0, 1), r)
+        photos.append(Photo(im.name, Path(im.name), orientation=reading))
+    before = _verified(db_path)
+    assert before == 45
+    stats = drop_pairs_against_orientation(db_path, photos, 35.0, 15)
+    assert stats["photos"] == 10 and stats["checked"] == 45 and stats["no_pose"] == 0
+    assert stats["dropped"] == 16 and _verified(db_path) == 29
+    assert stats["disagreement_deg"]["median"] < 15.0
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        assert db.num_matched_image_pairs() == 45  # the matches stay: never matched again
+    finally:
+        db.close()
+
+
+def test_no_orientation_or_the_check_off_drops_nothing(dataset):
+    db_path, rec = dataset
+    names = [rec.image(i).name for i in sorted(rec.reg_image_ids())]
+    bare = [Photo(n, Path(n)) for n in names]
+    assert drop_pairs_against_orientation(db_path, bare, 35.0, 15)["checked"] == 0
+    wrong = [Photo(n, Path(n), orientation=(90.0 * k, 0.0, 0.0)) for k, n in enumerate(names)]
+    assert drop_pairs_against_orientation(db_path, wrong, 0.0, 15)["dropped"] == 0
+    assert _verified(db_path) == 45
