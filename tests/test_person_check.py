@@ -21,6 +21,7 @@ from scenebot.sfm.person_check import (
     pair_track_shares,
     turned_in_place,
 )
+from tests.fixtures.synthetic import synthetic_database
 
 
 def _walk(n=32, eye=1.5, std=0.05, seed=0) -> tuple[list[str], np.ndarray]:
@@ -94,14 +95,7 @@ def test_contradicted_pairs_are_those_far_below_the_median_pair():
 @pytest.fixture
 def synthetic(tmp_path):
     """A synthetic model and its database (verified pairs with inlier matches)."""
-    opts = pycolmap.SyntheticDatasetOptions()
-    opts.num_rigs, opts.num_cameras_per_rig, opts.num_frames_per_rig = 1, 1, 8
-    opts.num_points3D = 300
-    db_path = tmp_path / "database.db"
-    db = pycolmap.Database.open(str(db_path))
-    rec = pycolmap.synthesize_dataset(opts, db)
-    db.close()
-    return rec, db_path
+    return synthetic_database(tmp_path, 8, 300)
 
 
 def test_a_right_map_holds_every_verified_pair(synthetic):

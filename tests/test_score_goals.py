@@ -80,16 +80,16 @@ def test_complete_flag():
     assert not goals_document(poses, np.full(3, np.nan), np.array([], int), 10.0, "r")["complete"]
 
 
-@pytest.fixture(scope="module")
-def scored_room(tmp_path_factory):
-    root = tmp_path_factory.mktemp("goals") / "office" / "round_001"
-    V, F = syn.room(cell_m=0.5)
-    # every photo looks west: the east walls are never photographed
-    from scenebot.geometry import planar_cam_from_world
+def _west_facing_map(root, pitch_deg: float) -> MeshOutputs:
+    """A synthetic room's map (``root/sfm``) whose photos all look west, tilted up by
+    ``pitch_deg`` (the east walls never photographed), and its mesh and free space."""
+    from scenebot.geometry import tilted_cam_from_world
 
+    V, F = syn.room(cell_m=0.5)
     th = np.deg2rad(np.arange(125, 236, 10))
     p = np.array([(x, y, a) for x in (-1.5, 0.0, 1.5) for y in (-1.0, 0.8) for a in th])
-    Rt = planar_cam_from_world(p[:, 0], p[:, 1], p[:, 2])
+    pitch = np.full(len(p), np.radians(pitch_deg))
+    Rt = tilted_cam_from_world(np.c_[p[:, :2], np.zeros(len(p))], p[:, 2], pitch)
     R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]
     K = syn.default_intrinsics()
     rng = np.random.default_rng(2)
@@ -97,6 +97,13 @@ def scored_room(tmp_path_factory):
     syn.write_colmap_model(root / "sfm", K, R, t, pts, syn.visible_mask(V, F, R, t, K, pts), rng)
     mo = MeshOutputs(root / "mesh.ply", root / "freespace.json", root / "freespace.npz")
     run_mesh(MeshConfig(), MeshInputs(root / "sfm"), mo)
+    return mo
+
+
+@pytest.fixture(scope="module")
+def scored_room(tmp_path_factory):
+    root = tmp_path_factory.mktemp("goals") / "office" / "round_001"
+    mo = _west_facing_map(root, pitch_deg=0.0)
     so = ScoreOutputs(root / "candidates.csv", root / "score_views.png")
     summary = run_score(
         ScoreConfig(n_candidates=300, width=40, height=30, plot_top=2, backend="cpu"),
@@ -150,21 +157,8 @@ def test_a_robots_candidates_look_as_its_camera_is_mounted(tmp_path):
     """The map's photos all tilted up 15 deg (a camera mounted pitched): the candidates are
     that camera in the camera plane (z = 0, pitch 15 deg in candidates.csv, what the goals
     and the score-validity study read), and the unphotographed east still scores worse."""
-    from scenebot.geometry import tilted_cam_from_world
-
     root = tmp_path / "office" / "round_001"
-    V, F = syn.room(cell_m=0.5)
-    th = np.deg2rad(np.arange(125, 236, 10))
-    p = np.array([(x, y, a) for x in (-1.5, 0.0, 1.5) for y in (-1.0, 0.8) for a in th])
-    pitch = np.full(len(p), np.radians(15.0))
-    Rt = tilted_cam_from_world(np.c_[p[:, :2], np.zeros(len(p))], p[:, 2], pitch)
-    R, t = Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:]
-    K = syn.default_intrinsics()
-    rng = np.random.default_rng(2)
-    pts, _ = syn.sample_surface(V, F, 12000, rng)
-    syn.write_colmap_model(root / "sfm", K, R, t, pts, syn.visible_mask(V, F, R, t, K, pts), rng)
-    mo = MeshOutputs(root / "mesh.ply", root / "freespace.json", root / "freespace.npz")
-    run_mesh(MeshConfig(), MeshInputs(root / "sfm"), mo)
+    mo = _west_facing_map(root, pitch_deg=15.0)
     so = ScoreOutputs(root / "candidates.csv", None)
     run_score(
         ScoreConfig(n_candidates=100, width=40, height=30, backend="cpu"),

@@ -12,6 +12,7 @@ import pytest
 
 from scenebot.sfm.orientation import drop_pairs_against_orientation, rotation_from_orientation
 from scenebot.sfm.photos import Photo
+from tests.fixtures.synthetic import synthetic_database
 
 
 def orientation_of(R: np.ndarray) -> tuple[float, float, float]:
@@ -25,13 +26,7 @@ def orientation_of(R: np.ndarray) -> tuple[float, float, float]:
 @pytest.fixture()
 def dataset(tmp_path):
     """Ten photos of 400 points, every pair matched and verified."""
-    opts = pycolmap.SyntheticDatasetOptions()
-    opts.num_rigs, opts.num_cameras_per_rig, opts.num_frames_per_rig = 1, 1, 10
-    opts.num_points3D = 400
-    db_path = tmp_path / "database.db"
-    db = pycolmap.Database.open(str(db_path))
-    rec = pycolmap.synthesize_dataset(opts, db)
-    db.close()
+    rec, db_path = synthetic_database(tmp_path, 10, 400)
     return db_path, rec
 
 

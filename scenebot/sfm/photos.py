@@ -150,23 +150,25 @@ def check_photos(photos: list[Photo], fallback_focal_factor: float) -> None:
         )
 
 
-def _pose3(d: dict | None) -> tuple[float, float, float] | None:
+def _three(d: dict | None, keys: tuple[str, str, str]) -> tuple[float, float, float] | None:
+    """The three numbers of ``d`` under ``keys``, or None when one is missing or not one."""
     if not d:
         return None
     try:
-        return float(d["x"]), float(d["y"]), float(d["theta"])
+        a, b, c = (float(d[k]) for k in keys)
     except (KeyError, TypeError, ValueError):
         return None
+    return a, b, c
+
+
+def _pose3(d: dict | None) -> tuple[float, float, float] | None:
+    """A logged robot pose (``x``, ``y``, ``theta``), or None."""
+    return _three(d, ("x", "y", "theta"))
 
 
 def _orientation(d: dict | None) -> tuple[float, float, float] | None:
     """The log's ``orientation`` (``heading_deg``, ``pitch_deg``, ``roll_deg``), or None."""
-    if not d:
-        return None
-    try:
-        return float(d["heading_deg"]), float(d["pitch_deg"]), float(d["roll_deg"])
-    except (KeyError, TypeError, ValueError):
-        return None
+    return _three(d, ("heading_deg", "pitch_deg", "roll_deg"))
 
 
 def image_root_of(capture_dirs: list[Path]) -> Path:
