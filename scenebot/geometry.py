@@ -122,6 +122,11 @@ def view_direction(heading_rad: float, pitch_rad: float = 0.0) -> np.ndarray:
     return np.array([cp * np.cos(heading_rad), cp * np.sin(heading_rad), np.sin(pitch_rad)])
 
 
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """The angle (deg) of a rotation matrix ``R`` (3, 3)."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+
+
 def mount_pitch(R_cam_from_world: np.ndarray) -> float:
     """The tilt (rad, up positive) of a robot's camera on its mount, from a map: the median
     pitch of the photos' optical axes (``R_cam_from_world`` (N, 3, 3); the map frame's z is
@@ -131,6 +136,18 @@ def mount_pitch(R_cam_from_world: np.ndarray) -> float:
     if not len(R):
         return 0.0
     return float(np.median(np.arcsin(np.clip(R[:, 2, 2], -1.0, 1.0))))
+
+
+def map_mount(rec) -> tuple[float, float]:
+    """The camera plane's height and the mount's pitch (rad) of a robot's map (a
+    ``pycolmap.Reconstruction``): the median height of its camera centres and
+    :func:`mount_pitch` of its photos (0, 0 for no photo)."""
+    ids = list(rec.reg_image_ids())
+    if not ids:
+        return 0.0, 0.0
+    heights = [rec.image(i).projection_center()[2] for i in ids]
+    rot = np.array([rec.image(i).cam_from_world().rotation.matrix() for i in ids])
+    return float(np.median(heights)), mount_pitch(rot)
 
 
 def planar_cam_from_world(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:

@@ -525,8 +525,7 @@ def test_the_robots_estimate_as_a_camera_pose(theta):
 def test_the_mount_pitch_is_the_median_pitch_of_the_maps_photos():
     """mount_pitch: the tilt every photo of a robot's camera shares, whatever the heading;
     a few photos registered tilted do not move it; no photo: 0."""
-    from scenebot.geometry import look_rotation, mount_pitch
-    from scenebot.sfm.register import map_mount
+    from scenebot.geometry import look_rotation, map_mount, mount_pitch
 
     rng = np.random.default_rng(0)
     heads = rng.uniform(-np.pi, np.pi, 40)

@@ -301,12 +301,9 @@ def run_perimeter_round(cfg: Config, capture_dir: Path) -> dict:
                 image = f"images/r000_{i:04d}.jpg"
                 truth = person.take(pose, capture_dir / image)
                 taken.append((image, pose))
-                rec = {"type": "photo", "t": float(i), "index": i, "image": image,
-                       "sha256": sha256_of(capture_dir / image)}  # fmt: skip
-                orientation = orientation_record(person, pose)
-                if orientation is not None:
-                    rec["orientation"] = orientation
-                clog.write(rec | {"truth": truth})
+                clog.write({"type": "photo", "t": float(i), "index": i, "image": image,
+                            "sha256": sha256_of(capture_dir / image),
+                            **orientation_record(person, pose), "truth": truth})  # fmt: skip
             tape = _tape(person, taken, ps)
             if tape is not None:
                 clog.write({"type": "event", "t": float(len(taken)), "event": "known_distance",
@@ -376,10 +373,7 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
                 name = f"person_r{round_index:03d}_{n:03d}.jpg"
                 truth = person.take(shot.taken, inbox / name)
                 truth["aimed"] = rec["aimed"]
-                orientation = orientation_record(person, shot.taken)
-                if orientation is not None:
-                    rec["orientation"] = orientation
-                rec |= {"image": name, "truth": truth}
+                rec |= {"image": name, **orientation_record(person, shot.taken), "truth": truth}
                 n += 1
             records.append(rec)
     tmp = inbox / f".{PERSON_SIM_LOG}.{os.getpid()}.part"

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.geometry import mount_pitch
+from scenebot.geometry import map_mount
 from scenebot.localize.config import LocalizeConfig
 from scenebot.localize.dlt import position_std_m, ransac_dlt_pose
 from scenebot.localize.features import extract_sift, load_gray
@@ -200,8 +200,7 @@ class LocalizationMap:
         cams = rec.cameras
         if not cams:
             raise ValueError(f"{cams_file}: no camera in the model")
-        rot = [rec.image(i).cam_from_world().rotation.matrix() for i in rec.reg_image_ids()]
-        pitch = math.degrees(mount_pitch(np.array(rot).reshape(-1, 3, 3)))
+        pitch = math.degrees(map_mount(rec)[1])
         camera = cams[min(cams)]
         if cache and cache_file is None:
             cache_file = sfm_dir / "point_descriptors.flann"

@@ -224,19 +224,21 @@ class SimPerson:
         return truth_record(pose)
 
 
-def orientation_record(person: SimPerson, pose: ShotPose) -> dict | None:
-    """What the person's phone records of its orientation with a photo (the capture log's
-    ``orientation``): the compass heading with ``person_sim.compass_std_deg`` of error, the
-    pitch and roll from its accelerometer with ``gravity_std_deg``; None for a phone without
-    them (``compass_std_deg`` null). Degrees, the heading counter-clockwise like the map's."""
+def orientation_record(person: SimPerson, pose: ShotPose) -> dict:
+    """The fields the person's phone adds to a photo's record: ``orientation``, the compass
+    heading with ``person_sim.compass_std_deg`` of error, the pitch and roll from its
+    accelerometer with ``gravity_std_deg``; none for a phone without them (``compass_std_deg``
+    null). Degrees, the heading counter-clockwise like the map's."""
     cfg = person.cfg
     if cfg.compass_std_deg is None:
-        return None
+        return {}
     rng = person.sensor_rng
     return {
-        "heading_deg": math.degrees(pose.heading) + float(rng.normal(0, cfg.compass_std_deg)),
-        "pitch_deg": math.degrees(pose.pitch) + float(rng.normal(0, cfg.gravity_std_deg)),
-        "roll_deg": math.degrees(pose.roll) + float(rng.normal(0, cfg.gravity_std_deg)),
+        "orientation": {
+            "heading_deg": math.degrees(pose.heading) + float(rng.normal(0, cfg.compass_std_deg)),
+            "pitch_deg": math.degrees(pose.pitch) + float(rng.normal(0, cfg.gravity_std_deg)),
+            "roll_deg": math.degrees(pose.roll) + float(rng.normal(0, cfg.gravity_std_deg)),
+        }
     }
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenebot.geometry import Intrinsics, planar_cam_from_world, tilted_cam_from_world
+from scenebot.geometry import Intrinsics, tilted_cam_from_world
 
 VIEW_COLS = 19
 
@@ -53,11 +53,8 @@ def candidate_views(poses: np.ndarray, intr: Intrinsics, pitch: float = 0.0) -> 
         (N, 19) float64 packed views.
     """
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    if pitch == 0.0:
-        Rt = planar_cam_from_world(poses[:, 0], poses[:, 1], poses[:, 2])
-    else:
-        xyz = np.column_stack([poses[:, :2], np.zeros(len(poses))])
-        Rt = tilted_cam_from_world(xyz, poses[:, 2], np.full(len(poses), pitch))
+    xyz = np.column_stack([poses[:, :2], np.zeros(len(poses))])
+    Rt = tilted_cam_from_world(xyz, poses[:, 2], np.full(len(poses), pitch))
     return pack_views(Rt[:, :9].reshape(-1, 3, 3), Rt[:, 9:], intr)
 
 

@@ -17,6 +17,8 @@ from typing import NamedTuple
 import numpy as np
 import pycolmap
 
+from scenebot.geometry import rotation_angle_deg
+
 M_PER_INCH = 0.0254
 
 
@@ -218,7 +220,7 @@ def _pose_errors(pairs: _TruthPairs, s: float, R: np.ndarray, t: np.ndarray) -> 
     for Re, Rt in zip(pairs.est_r, pairs.true_r, strict=True):
         # camera orientation in the true world: R_cam_from_world_est @ R^T
         dR = (Re @ R.T) @ Rt.T
-        rot_err.append(math.degrees(math.acos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
+        rot_err.append(rotation_angle_deg(dR))
     return _Errors(total, los, transverse, heading, np.array(rot_err))
 
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from scenebot.geometry import orientation_rotation
+from scenebot.geometry import orientation_rotation, rotation_angle_deg
 from scenebot.sfm.features import open_database
 from scenebot.sfm.photos import Photo
 
@@ -39,11 +39,6 @@ def rotation_from_orientation(orientation: tuple[float, float, float]) -> np.nda
     (deg)."""
     h, p, r = (math.radians(v) for v in orientation)
     return orientation_rotation(h, p, r)
-
-
-def rotation_angle_deg(R: np.ndarray) -> float:
-    """The angle (deg) of a rotation matrix."""
-    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def contradicted(judged: list[tuple[float, int, int]], max_deg: float) -> list[tuple[int, int]]:

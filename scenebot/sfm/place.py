@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pycolmap
 
+from scenebot.geometry import map_mount
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.features import open_database
 from scenebot.sfm.mapping import (
@@ -38,7 +39,6 @@ from scenebot.sfm.register import (
     camera_priors,
     images_of,
     map_correspondences,
-    map_mount,
     points_of,
     pose_near_estimate,
 )

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from scenebot.geometry import look_rotation, mount_pitch
+from scenebot.geometry import look_rotation, map_mount
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.features import open_database
 from scenebot.sfm.mapping import (
@@ -181,17 +181,6 @@ def camera_priors(
         rot = look_rotation(p.localization[2] + math.radians(camera_yaw_deg), pitch_rad)
         out[p.name] = pycolmap.Rigid3d(pycolmap.Rotation3d(rot), -rot @ centre)
     return out
-
-
-def map_mount(rec: pycolmap.Reconstruction) -> tuple[float, float]:
-    """The camera plane's height and the mount's pitch (rad) of a robot's map: the median
-    height of its camera centres and the median pitch of its photos (0, 0 for no photo)."""
-    ids = list(rec.reg_image_ids())
-    if not ids:
-        return 0.0, 0.0
-    heights = [rec.image(i).projection_center()[2] for i in ids]
-    rot = np.array([rec.image(i).cam_from_world().rotation.matrix() for i in ids])
-    return float(np.median(heights)), mount_pitch(rot)
 
 
 def shot_poses(goals: list[dict]) -> list[pycolmap.Rigid3d]:
