@@ -221,6 +221,20 @@ def adaptive_logs_until(wildcards):
     )
 
 
+def guide_fulfilment(wildcards):
+    """A guided round's fulfilment.json (rounds >= 1): the goals stage does not ask again
+    for a shot no photo fulfilled (scenebot.goals.failures.unfulfilled_shots)."""
+    r = int(wildcards.r)
+    return [f"{round_dir(r)}/fulfilment.json"] if GUIDED and r > 0 else []
+
+
+def previous_fulfilment(wildcards):
+    """Round r-1's fulfilment.json (rounds >= 2 of a guided campaign): its unfulfilled shots
+    are carried into round r's frame."""
+    r = int(wildcards.r)
+    return [f"{round_dir(r - 1)}/fulfilment.json"] if GUIDED and r > 1 else []
+
+
 def person_mesh(wildcards):
     """The round's mesh for the goals stage of a person's photos (its coverage picture:
     how many photos saw each part of the surface); a robot's goals do not read it."""

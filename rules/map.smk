@@ -127,6 +127,7 @@ rule goals:
         previous=previous_goals,
         mesh=person_mesh,
         logs=adaptive_logs_until,
+        fulfilment=guide_fulfilment,
     output:
         goals=f"{RESULTS}/round_{{r}}/goals.json",
         picture=report(
@@ -150,6 +151,7 @@ rule goals:
             previous_freespace_npz=input.previous[1:],
             mesh_ply=input.mesh,
             capture_logs=input.logs,
+            fulfilment_json=input.fulfilment,
         ),
     shell:
         "{params.py:q} -m scenebot goals --params {params.cfg:q} --sfm-dir {params.sfm:q} "
@@ -278,6 +280,7 @@ rule fulfilment:
         previous=lambda w: [f"{round_dir(int(w.r) - 1)}/sfm/{f}" for f in MODEL_FILES],
         goals=lambda w: f"{round_dir(int(w.r) - 1)}/goals.json",
         log=f"{RESULTS}/round_{{r}}/capture/log.jsonl",
+        previous_fulfilment=previous_fulfilment,
     output:
         json=f"{RESULTS}/round_{{r}}/fulfilment.json",
     log:
@@ -293,9 +296,12 @@ rule fulfilment:
         cfg=stage_params("guide"),
         sfm=lambda w, input: Path(input.model[0]).parent,
         previous=lambda w, input: Path(input.previous[0]).parent,
+        carried=lambda w, input: options(
+            previous_fulfilment_json=input.previous_fulfilment
+        ),
     shell:
         "{params.py:q} -m scenebot guide fulfilment --params {params.cfg:q} "
         "--sfm-dir {params.sfm:q} --previous-sfm-dir {params.previous:q} "
         "--goals-json {input.goals:q} --capture-log {input.log:q} "
-        "--sfm-report {input.report:q} --fulfilment-json {output.json:q} "
+        "--sfm-report {input.report:q} {params.carried} --fulfilment-json {output.json:q} "
         "2> >(tee {log:q} >&2)"

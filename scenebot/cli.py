@@ -67,14 +67,14 @@ STAGE_FILES = {
     "mesh": ("sfm_dir", "mesh_ply", "freespace_json", "freespace_npz", "freespace_png?"),
     "score": ("sfm_dir", "mesh_ply", "freespace_npz", "candidates_csv", "views_png?"),
     "goals": ("candidates_csv", "freespace_npz", "sfm_dir?", "previous_goals_json?",
-              "previous_freespace_npz?", "mesh_ply?", "capture_logs*", "goals_json",
-              "goals_png?"),
+              "previous_freespace_npz?", "mesh_ply?", "capture_logs*", "fulfilment_json?",
+              "goals_json", "goals_png?"),
     "plan": ("sfm_dir", "goals_json", "navgrid_npz", "paths_json", "plot_png?"),
     "goals-preview": ("sfm_dir", "image_dir", "goals_json", "preview_png", "preview_npz?"),
     "guide-page": ("sfm_dir", "image_dir", "goals_json", "preview_npz", "coverage_png",
                    "guide_html"),
     "guide-fulfilment": ("sfm_dir", "previous_sfm_dir", "goals_json", "capture_log",
-                         "sfm_report", "fulfilment_json"),
+                         "sfm_report", "previous_fulfilment_json?", "fulfilment_json"),
     "suite-report": ("evaluations*", "baselines*", "suite_json", "suite_md", "suite_png"),
 }  # fmt: skip
 

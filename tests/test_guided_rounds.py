@@ -198,6 +198,9 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
         {"rank": 1, "x": far[0] + 1.0, "y": far[1], "z": far[2], "theta": far[3], "pitch": far[4]},
     ]  # fmt: skip
     (scene / "round_000" / "goals.json").write_text(json.dumps({"goals": goals}))
+    # an earlier round's unfulfilled shot, in round 0's frame: carried into round 1's
+    earlier = {"round": "round_xxx", "rank": 3, "x": 1.0, "y": 2.0, "z": 0.5, "reason": "r"}
+    (scene / "round_000" / "fulfilment.json").write_text(json.dumps({"unfulfilled": [earlier]}))
     cap = scene / "round_001" / "capture"
     cap.mkdir()
     recs = [{"type": "photo", "index": k, "image": f"images/r001_{k:04d}.jpg",
@@ -211,7 +214,8 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
     # tolerances in map units: round 0's frame is half the size of round 1's
     g = GuideConfig(fulfil_distance_m=0.3, fulfil_heading_deg=10, fulfil_pitch_deg=10)
     doc = run(g, FulfilInputs(scene / "round_001" / "sfm", scene / "round_000" / "sfm",
-                              scene / "round_000" / "goals.json", cap / "log.jsonl", report),
+                              scene / "round_000" / "goals.json", cap / "log.jsonl", report,
+                              scene / "round_000" / "fulfilment.json"),
               FulfilOutputs(out))  # fmt: skip
     assert json.loads(out.read_text()) == json.loads(json.dumps(doc))
     assert doc["frame"]["scale"] == pytest.approx(2.0)
@@ -225,12 +229,25 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
     assert not lost["registered"]
     assert "IMG_2.jpg (images/r001_0002.jpg) did not register" in lost["message"]
     assert "no verified matches" in lost["message"]
-    assert doc["shots"] == [
-        {"rank": 0, "fulfilled_by": ["round_001/capture/images/r001_0000.jpg"]},
-        {"rank": 1, "fulfilled_by": []},
-    ]
+    assert [(s["rank"], s["fulfilled_by"]) for s in doc["shots"]] == [
+        (0, ["round_001/capture/images/r001_0000.jpg"]), (1, [])]  # fmt: skip
+
+    def moved(p):  # round 0's frame -> round 1's
+        c, s_ = math.cos(0.8), math.sin(0.8)
+        return 2.0 * np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]]) @ np.asarray(p) + [1, -3, 0.5]
+
+    shot1 = doc["shots"][1]
+    assert [shot1[k] for k in "xyz"] == pytest.approx(moved([far[0] + 1.0, far[1], far[2]]))
+    # the shots no photo fulfilled, every round's so far, in round 1's frame
+    carried, unfulfilled = doc["unfulfilled"]
+    assert carried["round"] == "round_xxx" and carried["rank"] == 3
+    assert [carried[k] for k in "xyz"] == pytest.approx(moved([1.0, 2.0, 0.5]))
+    assert unfulfilled["round"] == "round_000" and unfulfilled["rank"] == 1
+    assert [unfulfilled[k] for k in "xyz"] == pytest.approx([shot1[k] for k in "xyz"])
+    assert "no photo of round_001 fulfilled shot #2" in unfulfilled["reason"]
     assert doc["summary"] == {"shots": 2, "fulfilled": 1, "photos": 3, "registered": 2,
-                              "fulfilling_none": 1, "not_registered": 1}  # fmt: skip
+                              "fulfilling_none": 1, "not_registered": 1,
+                              "unfulfilled_so_far": 2}  # fmt: skip
     assert doc["messages"] == [off["message"], lost["message"]]
 
 

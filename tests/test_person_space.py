@@ -210,6 +210,27 @@ def test_person_goals_face_the_unphotographed_and_are_not_complete(room_map):
     assert room_map["go"].goals_png.stat().st_size > 20_000
 
 
+def test_shots_no_photo_fulfilled_are_not_asked_for_again(room_map, tmp_path):
+    """A person's guide asked for shots the person could not take (beyond a wall the map
+    lacks): the next guide's shots keep goals.nms_radius_m from each of them."""
+    first = room_map["doc"]["goals"]
+    ful = tmp_path / "fulfilment.json"
+    ful.write_text(json.dumps({"unfulfilled": [
+        {"round": "round_000", "rank": g["rank"], "x": g["x"], "y": g["y"], "z": g["z"],
+         "reason": "unfulfilled: no photo fulfilled it"} for g in first]}))  # fmt: skip
+    gi = GoalsInputs(room_map["so"].candidates_csv, room_map["out"].freespace_npz,
+                     room_map["root"] / "sfm", fulfilment_json=ful)  # fmt: skip
+    cfg = room_map["gcfg"]
+    doc = run_goals(cfg, gi, GoalsOutputs(tmp_path / "goals.json", tmp_path / "goals.png"),
+                    person=True)  # fmt: skip
+    assert doc["avoided"]["applied"] and doc["avoided"]["abandoned_goals"] == len(first)
+    assert doc["avoided"]["candidates"] > 0 and doc["goals"]
+    old = np.array([[g["x"], g["y"]] for g in first])
+    new = np.array([[g["x"], g["y"]] for g in doc["goals"]])
+    assert (np.linalg.norm(new[:, None] - old[None], axis=2) > cfg.nms_radius_m).all()
+    assert (tmp_path / "goals.png").stat().st_size > 20_000
+
+
 def _rewrite(src, dst, **cols):
     """A copy of candidates.csv with some columns replaced."""
     c = read_candidates(src)

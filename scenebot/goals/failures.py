@@ -6,6 +6,11 @@ found the goal inside an obstacle). A round whose goals were all abandoned adds 
 the map stays the same, and the score picks the same views again: the campaign spends its
 rounds (a living room once spent three rounds on 30 abandoned goals, taking no photo).
 
+A person's guided rounds have no capture log of goals: a shot of the guide that no photo
+fulfilled (:func:`unfulfilled_shots`, from the round's ``fulfilment.json``) is its abandoned
+goal; in the flat a person's guide asked for the same place beyond a wall four rounds in a
+row, skipped each time.
+
 Two uses of the capture logs of the adaptive rounds so far:
 
 * **avoid**: candidates within ``goals.nms_radius_m`` of a goal abandoned in an earlier
@@ -52,6 +57,21 @@ def abandoned_goals(capture_logs: list[Path]) -> list[dict]:
                      "reason": str(rec.get("reason", ""))}
                 )  # fmt: skip
     return out
+
+
+def unfulfilled_shots(fulfilment_json: Path | None) -> list[dict]:
+    """A person's abandoned goals: the shots of the guides so far that no photo fulfilled
+    (the round's ``fulfilment.json`` ``unfulfilled``, already in the round's map frame;
+    :mod:`scenebot.guide.fulfil`), as :func:`abandoned_goals` gives a robot's. None without
+    the file (round 0, a robot)."""
+    if fulfilment_json is None or not Path(fulfilment_json).is_file():
+        return []
+    doc = json.loads(Path(fulfilment_json).read_text(encoding="utf-8"))
+    return [
+        {"round": str(u.get("round", "")), "x": float(u["x"]), "y": float(u["y"]),
+         "reason": str(u.get("reason", "unfulfilled"))}
+        for u in doc.get("unfulfilled", [])
+    ]  # fmt: skip
 
 
 def near_abandoned(xy: np.ndarray, abandoned: list[dict], radius_m: float) -> np.ndarray:

@@ -102,11 +102,13 @@ def plot_person_goals(
     gains: np.ndarray,
     surface: np.ndarray,
     seen_by: np.ndarray,
+    abandoned: np.ndarray,
     title: str,
 ) -> None:
     """A person's advice: the next shots as camera frusta over a top and a side view, with the
-    photos already taken and each shot's predicted gain, and the surface coloured by how many
-    photos saw it (seen by fewer than 2: marked red).
+    photos already taken and each shot's predicted gain, the earlier shots no photo fulfilled
+    (not asked for again), and the surface coloured by how many photos saw it (seen by fewer
+    than 2: marked red).
 
     Args:
         path: output PNG.
@@ -118,6 +120,7 @@ def plot_person_goals(
             removes).
         surface: (P, 3) mesh vertices (m).
         seen_by: (P,) photos seeing each.
+        abandoned: (M, 2) x, y of the earlier shots no photo fulfilled.
         title: figure title.
     """
     from matplotlib.collections import LineCollection
@@ -140,6 +143,16 @@ def plot_person_goals(
         segs = frustum_lines(taken, intr, 0.5 * depth)[..., [a, b]].reshape(-1, 2, 2)
         ax.add_collection(LineCollection(segs, colors="tab:blue", linewidths=0.6, alpha=0.7))
         ax.plot(taken[:, a], taken[:, b], "o", color="tab:blue", ms=3, label="photos taken")
+        if b == 1 and len(abandoned):
+            ax.plot(
+                abandoned[:, 0],
+                abandoned[:, 1],
+                "x",
+                color="0.3",
+                ms=7,
+                mew=1.5,
+                label=f"earlier shots unfulfilled ({len(abandoned)}): not asked again",
+            )
         for r, g in enumerate(goals):
             segs = frustum_lines(g[None], intr, depth)[0][..., [a, b]]
             ax.add_collection(LineCollection(segs, colors=[colours[r]], linewidths=2))

@@ -14,7 +14,12 @@ from scenebot.artifacts.candidates import read_candidates
 from scenebot.artifacts.freespace import FreeSpace, FreeSpaceError
 from scenebot.geometry import read_sparse_map
 from scenebot.goals.config import GoalsConfig
-from scenebot.goals.failures import abandoned_goals, idle_rounds, near_abandoned
+from scenebot.goals.failures import (
+    abandoned_goals,
+    idle_rounds,
+    near_abandoned,
+    unfulfilled_shots,
+)
 from scenebot.goals.select import goals_document, select_goals, write_goals
 from scenebot.goals.stopping import apply_stopping_rule, diminishing_returns
 
@@ -34,6 +39,9 @@ class GoalsInputs:
     # the capture logs of the adaptive rounds so far (goals abandoned there are not chosen
     # again; rounds that added no photo make the campaign stuck: scenebot.goals.failures)
     capture_logs: list[Path] = field(default_factory=list)
+    # a guided round's fulfilment.json: the shots no photo fulfilled, as a person's abandoned
+    # goals (scenebot.guide.fulfil)
+    fulfilment_json: Path | None = None
 
 
 @dataclass
@@ -307,6 +315,8 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
         log.warning("%s: no candidate could be registered (goals.min_seen_fraction, "
                     "goals.min_matchable_points, goals.person_min_matchable_share: %d "
                     "points); goals ignore the overlap", where, min_points)  # fmt: skip
+    abandoned = unfulfilled_shots(inputs.fulfilment_json)
+    avoided = _avoid_abandoned(valid, poses, abandoned, cfg.nms_radius_m, where)
     score = np.where(valid, cols["score_deg"], np.nan)
     ranked = select_goals_3d(
         poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
@@ -334,6 +344,7 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
             "map_images": None if smap is None else len(smap.names),
             "map_photos": _map_photos(inputs.sfm_dir),
             "coverage": None if coverage is None else coverage[2],
+            "avoided": avoided,
         },
     )  # fmt: skip
     returns = diminishing_returns(
@@ -343,7 +354,7 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     )  # fmt: skip
     doc["score_gain"] = returns
     apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
-    _apply_stuck(doc, idle_rounds(doc["map_images"], inputs.previous_goals_json, [],
+    _apply_stuck(doc, idle_rounds(doc["map_images"], inputs.previous_goals_json, abandoned,
                                   cfg.patience, doc["map_photos"]))  # fmt: skip
     degenerate = vol.degenerate()
     if degenerate is not None or not valid.any():
@@ -371,6 +382,7 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
         plot_person_goals(
             outputs.goals_png, vol, taken, smap.intrinsics[0], poses[chosen],
             cols["score_deg"][chosen], surface, seen_by,
+            np.array([[a["x"], a["y"]] for a in abandoned]).reshape(-1, 2),
             f"{where}: the next {len(chosen)} shots (complete={doc['complete']}); predicted "
             "gain = view score (deg, the rendering error a photo there removes)",
         )  # fmt: skip

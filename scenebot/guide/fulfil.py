@@ -11,6 +11,13 @@ carries the previous round's photos from the one map to the other.
 
 A photo that fulfils no shot is kept (it still adds to the map) and named; one that did not
 register is named with the sfm stage's reason. The messages go to the log and the file.
+
+A shot no photo fulfilled is *unfulfilled* (``unfulfilled``: its place in this round's frame):
+the person could not stand there (behind a wall the map lacks, inside furniture), did not
+take it, or took a photo that did not register there. The goals stage does not ask for a view
+near it again (as it does with the goals a robot abandoned: :mod:`scenebot.goals.failures`);
+the previous round's unfulfilled shots are carried into this round's frame with the shots, so
+the list holds every round's so far.
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ class FulfilInputs:
     goals_json: Path
     capture_log: Path
     sfm_report: Path
+    previous_fulfilment_json: Path | None = None  # round r-1's (its unfulfilled shots)
 
 
 @dataclass
@@ -82,6 +90,19 @@ def shots_in_frame(goals: list[dict], sim) -> list[dict]:
         c = s * R @ np.array([g["x"], g["y"], g.get("z", 0.0)], float) + t
         h, p = _heading_pitch(R @ view_direction(g["theta"], g.get("pitch", 0.0)))
         out.append({"rank": g["rank"], "center": c, "heading": h, "pitch": p})
+    return out
+
+
+def carried_unfulfilled(path: Path | None, sim) -> list[dict]:
+    """The unfulfilled shots of the previous fulfilment.json (its frame) moved into this
+    round's by the similarity ``sim`` = (s, R, t); none without the file."""
+    if path is None or not Path(path).is_file():
+        return []
+    s, R, t = sim
+    out = []
+    for u in json.loads(Path(path).read_text(encoding="utf-8")).get("unfulfilled", []):
+        c = s * R @ np.array([u["x"], u["y"], u.get("z", 0.0)], float) + t
+        out.append({**u, "x": float(c[0]), "y": float(c[1]), "z": float(c[2])})
     return out
 
 
@@ -179,7 +200,18 @@ def run(cfg: GuideConfig, inputs: FulfilInputs, outputs: FulfilOutputs) -> dict:
         photos.append(row)
     for m in messages:
         log.warning("%s", m)
-    shot_rows = [{"rank": s["rank"], "fulfilled_by": by_shot[s["rank"]]} for s in shots]
+    shot_rows = [
+        {"rank": s["rank"], "fulfilled_by": by_shot[s["rank"]], "x": float(s["center"][0]),
+         "y": float(s["center"][1]), "z": float(s["center"][2]), "heading": s["heading"],
+         "pitch": s["pitch"]}
+        for s in shots
+    ]  # fmt: skip
+    asked = Path(inputs.goals_json).parent.name
+    unfulfilled = carried_unfulfilled(inputs.previous_fulfilment_json, sim) + [
+        {"round": asked, "rank": s["rank"], "x": s["x"], "y": s["y"], "z": s["z"],
+         "reason": f"unfulfilled: no photo of {rnd} fulfilled shot #{s['rank'] + 1} of {guide}"}
+        for s in shot_rows if not s["fulfilled_by"]
+    ]  # fmt: skip
     summary = {
         "shots": len(shots),
         "fulfilled": sum(1 for s in shot_rows if s["fulfilled_by"]),
@@ -187,6 +219,7 @@ def run(cfg: GuideConfig, inputs: FulfilInputs, outputs: FulfilOutputs) -> dict:
         "registered": sum(1 for p in photos if p["registered"]),
         "fulfilling_none": sum(1 for p in photos if p["registered"] and not p["fulfils"]),
         "not_registered": sum(1 for p in photos if not p["registered"]),
+        "unfulfilled_so_far": len(unfulfilled),
     }
     doc = {
         "round": rnd,
@@ -196,6 +229,7 @@ def run(cfg: GuideConfig, inputs: FulfilInputs, outputs: FulfilOutputs) -> dict:
         "frame": {"previous_photos_matched": len(common), "scale": sim[0]},
         "summary": summary,
         "shots": shot_rows,
+        "unfulfilled": unfulfilled,
         "photos": photos,
         "messages": messages,
     }
