@@ -169,3 +169,13 @@ def write_faults(log: CaptureLog, robot) -> None:
     if drain is not None:
         for record in drain():
             log.write(record)
+
+
+def skipped_shots(path: str | Path) -> dict[int, str]:
+    """The shots of the guide a person's round could not take (the capture log's
+    ``shots_skipped`` events, from the inbox's ``skipped.json``): rank -> why."""
+    out: dict[int, str] = {}
+    for rec in read_log(path):
+        if rec.get("event") == "shots_skipped":
+            out |= {int(s["rank"]): str(s.get("reason") or "") for s in rec.get("shots", [])}
+    return out

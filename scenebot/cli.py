@@ -169,6 +169,28 @@ def cmd_guide_serve(args) -> int:
     return 0
 
 
+def cmd_guide_skip(args) -> int:
+    from scenebot.artifacts import inbox_dir, round_dir
+    from scenebot.capture.person import write_skipped
+    from scenebot.guide.serve import current_round
+
+    cfg = _config(args)
+    scene_dir = Path(args.scene_dir) if args.scene_dir else Path("results") / cfg.scene
+    rnd = current_round(scene_dir, args.round)
+    goals = round_dir(scene_dir, rnd) / "goals.json"
+    ranks = {g["rank"] for g in json.loads(goals.read_text(encoding="utf-8"))["goals"]}
+    wrong = sorted(set(args.shots) - ranks)
+    if wrong:
+        raise ValueError(
+            f"{goals} has no shot {', '.join(map(str, wrong))}: its shots are "
+            f"{', '.join(map(str, sorted(ranks)))} (the numbers on its guide page)"
+        )
+    path = write_skipped(inbox_dir(scene_dir, rnd), {k: args.reason for k in args.shots})
+    print(f"{path}: shots {', '.join(map(str, sorted(args.shots)))} of round {rnd}'s guide "
+          "marked as not taken; run snakemake: the next guide asks for others")  # fmt: skip
+    return 0
+
+
 def cmd_person_sim(args) -> int:
     from scenebot.capture.person import run_person_sim_shots
 
@@ -369,6 +391,18 @@ def build_parser() -> argparse.ArgumentParser:
                     "computer only; 0.0.0.0: a phone on the same network too)")  # fmt: skip
     gs.add_argument("--port", type=int, help="port (default guide.port)")
     gs.set_defaults(func=cmd_guide_serve)
+    gk = gsub.add_parser(
+        "skip",
+        help="mark shots of the current guide that you cannot take (behind a wall, out of "
+        "reach): the next round plans others, also when you took no photo",
+    )
+    with_config(gk)
+    gk.add_argument("shots", type=int, nargs="+", help="shot numbers as on the guide page")
+    gk.add_argument("--scene-dir", help="the campaign's folder (default results/<scene>)")
+    gk.add_argument("--round", type=int, help="the guide of this round (default: the latest)")
+    gk.add_argument("--reason", default="the person could not take it", help="why (kept in "
+                    "the round's capture log and fulfilment.json)")  # fmt: skip
+    gk.set_defaults(func=cmd_guide_skip)
 
     d = sub.add_parser("dense", help="dense multi-view stereo and fusion of a map")
     with_config(d)

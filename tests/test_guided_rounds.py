@@ -205,6 +205,9 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
     cap.mkdir()
     recs = [{"type": "photo", "index": k, "image": f"images/r001_{k:04d}.jpg",
              "source": f"{cap}/inbox/IMG_{k}.jpg"} for k in range(3)]  # fmt: skip
+    # the person said it could not take shot 1 (the inbox's skipped.json, in the log)
+    recs.append({"type": "event", "event": "shots_skipped",
+                 "shots": [{"rank": 1, "reason": "behind a wall"}]})  # fmt: skip
     (cap / "log.jsonl").write_text("".join(json.dumps(r) + "\n" for r in recs))
     report = scene / "round_001" / "sfm" / "report.json"
     report.write_text(json.dumps({"dropped": {
@@ -225,7 +228,8 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
     assert off["nearest_shot"]["rank"] == 1
     assert off["nearest_shot"]["distance"] == pytest.approx(2.0)  # 1 unit of round 0 x 2
     assert "IMG_1.jpg (images/r001_0001.jpg) fulfils no shot" in off["message"]
-    assert "shot, #2, is 2.00 away" in off["message"] and "It is kept" in off["message"]
+    assert "nearest, shot 1, is 2.00 away" in off["message"]  # numbered as on the guide page
+    assert "It is kept" in off["message"]
     assert not lost["registered"]
     assert "IMG_2.jpg (images/r001_0002.jpg) did not register" in lost["message"]
     assert "no verified matches" in lost["message"]
@@ -244,9 +248,10 @@ def test_the_shots_each_photo_fulfilled_in_a_frame_fixed_anew(tmp_path):
     assert [carried[k] for k in "xyz"] == pytest.approx(moved([1.0, 2.0, 0.5]))
     assert unfulfilled["round"] == "round_000" and unfulfilled["rank"] == 1
     assert [unfulfilled[k] for k in "xyz"] == pytest.approx([shot1[k] for k in "xyz"])
-    assert "no photo of round_001 fulfilled shot #2" in unfulfilled["reason"]
-    assert doc["summary"] == {"shots": 2, "fulfilled": 1, "photos": 3, "registered": 2,
-                              "fulfilling_none": 1, "not_registered": 1,
+    assert shot1["skipped"] == "behind a wall" and "skipped" not in doc["shots"][0]
+    assert unfulfilled["reason"] == "skipped: the person could not take shot 1 (behind a wall)"
+    assert doc["summary"] == {"shots": 2, "fulfilled": 1, "skipped": 1, "photos": 3,
+                              "registered": 2, "fulfilling_none": 1, "not_registered": 1,
                               "unfulfilled_so_far": 2}  # fmt: skip
     assert doc["messages"] == [off["message"], lost["message"]]
 

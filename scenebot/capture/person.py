@@ -48,6 +48,9 @@ log = logging.getLogger("scenebot.capture")
 INBOX = "inbox"
 PERSON_SIM_LOG = "person-sim.jsonl"
 """The simulated person's record of its shots, beside its photos in the inbox."""
+SKIPPED = "skipped.json"
+"""The shots of the guide the person could not take, in the inbox beside the photos
+(:func:`write_skipped`: ``scenebot guide skip``, ``guide serve``, the simulated person)."""
 
 
 class InboxError(RuntimeError):
@@ -56,6 +59,35 @@ class InboxError(RuntimeError):
 
 
 # ----------------------------------------------------------------------------- intake
+
+
+def read_skipped(inbox: Path) -> dict[int, str]:
+    """The shots the person said it could not take (``inbox/skipped.json``): rank (0-based,
+    as in goals.json) -> why; empty without the file."""
+    path = Path(inbox) / SKIPPED
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        return {int(s["rank"]): str(s.get("reason") or "") for s in doc.get("shots", [])}
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise InboxError(
+            f"{path} is not a list of skipped shots ({exc}): write it with python -m "
+            "scenebot guide skip, or delete it"
+        ) from exc
+
+
+def write_skipped(inbox: Path, shots: dict[int, str]) -> Path:
+    """Add shots the person could not take (rank -> why) to ``inbox/skipped.json``; a shot
+    already there keeps its first reason. Written whole or not at all."""
+    inbox = Path(inbox)
+    inbox.mkdir(parents=True, exist_ok=True)
+    merged = {**{int(k): v for k, v in shots.items()}, **read_skipped(inbox)}
+    doc = {"shots": [{"rank": k, "reason": merged[k]} for k in sorted(merged)]}
+    tmp = inbox / f".{SKIPPED}.{os.getpid()}.part"
+    tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, inbox / SKIPPED)
+    return inbox / SKIPPED
 
 
 def photo_problem(path: Path) -> str | None:
@@ -203,7 +235,10 @@ def _no_photos(where: Path, round_index: int, left_out: list[str], guide: Path |
     )
     if round_index > 0:
         msg += (
-            f"; to end the campaign with round {round_index - 1} instead: snakemake "
+            f"; shots you cannot take (behind a wall, out of reach): python -m scenebot guide "
+            f"skip SHOT ... (the numbers on the guide page; a round of only skipped shots plans "
+            "others); "
+            f"to end the campaign with round {round_index - 1} instead: snakemake "
             f"--config max_rounds={round_index}"
         )
     if left_out:
@@ -240,6 +275,9 @@ def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
     inbox = capture_dir / INBOX
     guide = capture_dir.parent.parent / f"round_{round_index - 1:03d}" / "guide" / "index.html"
     files = photo_files(inbox)
+    skipped = read_skipped(inbox)
+    if not files and skipped:
+        return _skipped_round(cfg, capture_dir, round_index, inbox, skipped)
     if not files:
         raise InboxError(_no_photos(inbox, round_index, [], guide))
     extra = {}
@@ -250,15 +288,45 @@ def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
                 extra[rec["image"]] = {
                     k: rec[k] for k in ("orientation", "truth", "aimed_shot") if k in rec
                 }
-    return _take_in(cfg, capture_dir, round_index, files, inbox, extra, guide)
+    events = [_skipped_event(skipped)] if skipped else []
+    return _take_in(cfg, capture_dir, round_index, files, inbox, extra, guide, events)
 
 
-def _take_in(cfg, capture_dir, round_index, files, source, extra=None, guide=None) -> dict:
+def _skipped_event(skipped: dict[int, str]) -> dict:
+    """The capture log's record of the shots the person could not take."""
+    return {"type": "event", "t": 0.0, "event": "shots_skipped",
+            "shots": [{"rank": k, "reason": v} for k, v in sorted(skipped.items())]}  # fmt: skip
+
+
+def _skipped_round(cfg: Config, capture_dir: Path, round_index: int, inbox: Path,
+                   skipped: dict[int, str]) -> dict:  # fmt: skip
+    """A round in which the person took none of the shots and said why (``skipped.json``):
+    a capture without photos. The map stays as it was, the shots count as not fulfilled
+    (the next guide asks for others), and the round counts as idle (``goals.patience`` such
+    rounds in a row stop the campaign as stuck)."""
+    with capture_lock(capture_dir):
+        start_capture(capture_dir, keep=(INBOX,))
+        with CaptureLog(capture_dir / SESSION_LOG) as clog:
+            clog.write(_session(cfg, round_index, inbox))
+            clog.write(_skipped_event(skipped))
+            clog.write({"type": "end", "t": 0.0, "photos": 0, "left_out": 0,
+                        "reason": f"the person took none of the shots ({len(skipped)} skipped: "
+                        f"{inbox / SKIPPED})"})  # fmt: skip
+        finish_capture(capture_dir, plot_person_capture, photo_dirs=())
+    log.warning("round %d: no photo; the person could not take %d shots (%s): the next guide "
+                "asks for others", round_index, len(skipped), inbox / SKIPPED)  # fmt: skip
+    return {"photos": 0, "left_out": [], "skipped_shots": len(skipped), "source": str(inbox)}
+
+
+def _take_in(cfg, capture_dir, round_index, files, source, extra=None, guide=None,
+             events=()) -> dict:  # fmt: skip
     seen = earlier_hashes(capture_dir.parent.parent, round_index)
     with capture_lock(capture_dir):
         start_capture(capture_dir, keep=(INBOX,))
         with CaptureLog(capture_dir / SESSION_LOG) as clog:
             clog.write(_session(cfg, round_index, source))
+            for ev in events:
+                clog.write(ev)
             n, left_out = intake(clog, capture_dir, round_index, files, seen, extra)
             if n == 0:
                 raise InboxError(_no_photos(source, round_index, left_out, guide))
@@ -376,10 +444,14 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
                 rec |= {"image": name, **orientation_record(person, shot.taken), "truth": truth}
                 n += 1
             records.append(rec)
+    skipped = [r for r in records if "skipped" in r]
+    taken = {r["aimed_shot"] for r in records if "image" in r}
+    not_taken = {r["aimed_shot"]: r["skipped"] for r in skipped if r["aimed_shot"] not in taken}
+    if not_taken:  # what a person says of the shots it could not take
+        write_skipped(inbox, not_taken)
     tmp = inbox / f".{PERSON_SIM_LOG}.{os.getpid()}.part"
     tmp.write_text("".join(json.dumps(r) + "\n" for r in records), encoding="utf-8")
     os.replace(tmp, inbox / PERSON_SIM_LOG)
-    skipped = [r for r in records if "skipped" in r]
     return {"shots": len(goals), "photos": n, "skipped": len(skipped),
             "eye_height_m": person.eye_height_m, "map_to_world_scale": sim[0]}  # fmt: skip
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.capturelog import json_default, photo_records
+from scenebot.capturelog import json_default, photo_records, skipped_shots
 from scenebot.geometry import similarity_fit, view_direction
 from scenebot.guide.config import GuideConfig
 
@@ -185,7 +185,7 @@ def run(cfg: GuideConfig, inputs: FulfilInputs, outputs: FulfilOutputs) -> dict:
         row["nearest_shot"] = near
         if not row["fulfils"]:
             where = (
-                f"the nearest shot, #{near['rank'] + 1}, is {near['distance']:.2f} away, "
+                f"the nearest, shot {near['rank']}, is {near['distance']:.2f} away, "
                 f"{near['heading_deg']:.0f} deg off in heading and {near['pitch_deg']:.0f} deg "
                 f"in tilt (guide.fulfil_distance_m = {cfg.fulfil_distance_m}, "
                 f"fulfil_heading_deg = {cfg.fulfil_heading_deg}, fulfil_pitch_deg = "
@@ -207,14 +207,25 @@ def run(cfg: GuideConfig, inputs: FulfilInputs, outputs: FulfilOutputs) -> dict:
         for s in shots
     ]  # fmt: skip
     asked = Path(inputs.goals_json).parent.name
+    skipped = skipped_shots(inputs.capture_log)
+    for s in shot_rows:
+        if s["rank"] in skipped:
+            s["skipped"] = skipped[s["rank"]]
+
+    def why(s: dict) -> str:
+        if "skipped" in s:
+            return f"skipped: the person could not take shot {s['rank']} ({s['skipped']})"
+        return f"unfulfilled: no photo of {rnd} fulfilled shot {s['rank']} of {guide}"
+
     unfulfilled = carried_unfulfilled(inputs.previous_fulfilment_json, sim) + [
         {"round": asked, "rank": s["rank"], "x": s["x"], "y": s["y"], "z": s["z"],
-         "reason": f"unfulfilled: no photo of {rnd} fulfilled shot #{s['rank'] + 1} of {guide}"}
+         "reason": why(s)}
         for s in shot_rows if not s["fulfilled_by"]
     ]  # fmt: skip
     summary = {
         "shots": len(shots),
         "fulfilled": sum(1 for s in shot_rows if s["fulfilled_by"]),
+        "skipped": sum(1 for s in shot_rows if "skipped" in s),
         "photos": len(photos),
         "registered": sum(1 for p in photos if p["registered"]),
         "fulfilling_none": sum(1 for p in photos if p["registered"] and not p["fulfils"]),
