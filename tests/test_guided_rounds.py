@@ -284,3 +284,68 @@ def test_settings_name_a_guided_photo_as_the_person_named_it():
         photos[0].name, photos[2].name, 2.5,
     )  # fmt: skip
     assert _person_known_distance(s, None) is None
+
+
+# ------------------------------------------------------------------------- skipped shots
+
+
+def test_shots_the_person_cannot_take_make_a_round_without_photos(scene, tmp_path, capsys):
+    """`scenebot guide skip` marks shots of the current guide as not taken; an inbox with
+    no photo but skipped shots is a round without photos (not an error), the skips in its
+    log; the sfm stage keeps the previous map for it."""
+    from scenebot import cli
+    from scenebot.capturelog import skipped_shots
+    from scenebot.sfm.config import SfmConfig
+    from scenebot.sfm.stage import SfmInputs, SfmOutputs
+    from scenebot.sfm.stage import run as run_sfm
+
+    scene_dir, inbox, _ = scene
+    goals = {"goals": [{"rank": k, "x": 0, "y": 0, "theta": 0} for k in range(4)]}
+    (scene_dir / "round_000" / "goals.json").write_text(json.dumps(goals))
+    (scene_dir / "round_000" / "guide").mkdir()
+    (scene_dir / "round_000" / "guide" / "index.html").write_text("<p>guide</p>")
+    conf = tmp_path / "c.yaml"
+    conf.write_text(json.dumps({"scene": "office"}))
+    base = ["guide", "skip", "--config", str(conf), "--scene-dir", str(scene_dir)]
+    assert cli.main([*base, "1", "3", "--reason", "behind a wall"]) == 0
+    assert cli.main([*base, "3", "2"]) == 0  # shot 3 keeps its first reason
+    assert cli.main([*base, "7"]) == 1
+    err = capsys.readouterr().err
+    assert "has no shot 7: its shots are 0, 1, 2, 3 (the numbers on its guide page)" in err
+    doc = json.loads((inbox / "skipped.json").read_text())
+    assert doc["shots"] == [{"rank": 1, "reason": "behind a wall"},
+                            {"rank": 2, "reason": "the person could not take it"},
+                            {"rank": 3, "reason": "behind a wall"}]  # fmt: skip
+
+    summary = run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    assert summary["photos"] == 0 and summary["skipped_shots"] == 3
+    log = inbox.parent / "log.jsonl"
+    assert photo_records(log) == []
+    assert skipped_shots(log) == {1: "behind a wall", 2: "the person could not take it",
+                                  3: "behind a wall"}  # fmt: skip
+    assert next(r for r in read_log(log) if r["type"] == "end")["photos"] == 0
+
+    # the round's map is the previous one, unchanged, without mapping
+    rec = pycolmap.synthesize_dataset(pycolmap.SyntheticDatasetOptions())
+    prev = scene_dir / "round_000" / "sfm"
+    prev.mkdir()
+    rec.write(str(prev))
+    (prev / "report.json").write_text(json.dumps({"registered": rec.num_reg_images()}))
+    (prev / "map.png").write_bytes(b"png")
+    out = scene_dir / "round_001" / "sfm"
+    report = run_sfm(SfmConfig(), SfmInputs(tmp_path / "db.db", [scene_dir / "round_000" /
+                                            "capture", inbox.parent], previous_model=prev),
+                     SfmOutputs(out))  # fmt: skip
+    assert report["unchanged_from"] == "round_000"
+    assert report["registered"] == rec.num_reg_images()
+    assert json.loads((out / "report.json").read_text()) == report
+    for f in ("cameras.bin", "images.bin", "points3D.bin", "map.png"):
+        assert (out / f).read_bytes() == (prev / f).read_bytes()
+    assert not (tmp_path / "db.db").exists()  # nothing matched, nothing mapped
+
+
+def test_a_broken_skip_list_is_an_error_naming_it(scene, tmp_path):
+    _, inbox, _ = scene
+    (inbox / "skipped.json").write_text("[1, 2]")
+    with pytest.raises(InboxError, match=r"skipped\.json is not a list of skipped shots"):
+        run_inbox_round(cfg(tmp_path), inbox.parent, 1)

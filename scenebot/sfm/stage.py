@@ -479,6 +479,9 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
             (:func:`_check_registered`).
     """
     t_start = time.perf_counter()
+    unchanged = _round_without_photos(inputs, outputs)
+    if unchanged is not None:
+        return unchanged
     s = _open_session(cfg, inputs, person)
     features, pairs = _features_and_pairs(s)
     orientation = _drop_pairs_against_orientation(s)
@@ -525,6 +528,35 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
         report["orientation_pairs"] = orientation
     outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
     shutil.rmtree(s.work, ignore_errors=True)
+    return report
+
+
+def _round_without_photos(inputs: SfmInputs, outputs: SfmOutputs) -> dict | None:
+    """A round that took no photo (a person who could take none of the shots: the capture
+    log's ``shots_skipped``) leaves the map as it was: the previous round's model, its
+    descriptors, pictures and report are this round's (report.json ``unchanged_from``),
+    without mapping again. None when the round took photos, or without a previous model."""
+    from scenebot.capturelog import photo_records
+
+    if inputs.previous_model is None or not inputs.capture_dirs:
+        return None
+    log_path = Path(inputs.capture_dirs[-1]) / "log.jsonl"
+    if not log_path.is_file() or photo_records(log_path):
+        return None
+    prev, out = Path(inputs.previous_model), Path(outputs.model_dir)
+    _read_previous(prev)  # SfmError without a model
+    out.mkdir(parents=True, exist_ok=True)
+    for f in out.glob("*.bin"):
+        f.unlink()
+    for f in prev.iterdir():
+        if f.is_file():
+            shutil.copyfile(f, out / f.name)
+    report = json.loads((prev / "report.json").read_text(encoding="utf-8"))
+    report["unchanged_from"] = prev.parent.name
+    report["timings_s"] = {}
+    outputs.report.write_text(json.dumps(report, indent=1, default=_json_default))
+    log.warning("%s took no photo: the map is %s's, unchanged", log_path.parent.parent.name,
+                prev.parent.name)  # fmt: skip
     return report
 
 
