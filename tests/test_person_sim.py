@@ -149,6 +149,49 @@ def test_the_perimeter_walk_is_evenly_spaced_along_the_walls_facing_in(scene):
     assert len({int(((h + 45) % 360) // 90) for h in headings}) == 4
 
 
+def two_rooms():
+    """Two 3.9 x 3 m rooms side by side, a doorway (1 m wide, 2 m high, a lintel above) in
+    the wall between them."""
+    b = SceneBuilder("person-two-rooms")
+    tex = np.random.default_rng(0).integers(0, 255, (32, 32, 3), dtype=np.uint8)
+    wall = b.material(Material("wall", tex))
+    w, d, h = 8.0, 3.0, 2.5
+    b.box((0, 0, -0.1), (w, d, 0), wall)
+    b.box((0, 0, h), (w, d, h + 0.1), wall)
+    b.box((-0.1, -0.1, 0), (0, d + 0.1, h), wall)
+    b.box((w, -0.1, 0), (w + 0.1, d + 0.1, h), wall)
+    b.box((0, -0.1, 0), (w, 0, h), wall)
+    b.box((0, d, 0), (w, d + 0.1, h), wall)
+    b.box((3.9, 0, 0), (4.1, 1.0, h), wall)  # the wall between, the doorway at y 1..2
+    b.box((3.9, 2.0, 0), (4.1, d, h), wall)
+    b.box((3.9, 1.0, 2.0), (4.1, 2.0, h), wall)  # lintel
+    b.light((2.0, 1.5, h - 0.2))
+    b.light((6.0, 1.5, h - 0.2))
+    return b.build()
+
+
+def test_the_walk_goes_through_every_room(scene):
+    """Two rooms joined by a doorway: the walk goes along the walls of both, and through
+    the doorway between them photographing ahead; a single room's walk stays as it was."""
+    flat = two_rooms()
+    p = SimPerson(flat, PersonSimConfig(), Camera(), [3, 1], 3)
+    n = 40
+    walk = perimeter_walk(p, n, 0.6)
+    assert len(walk) == n
+    xy = np.array([s.center[:2] for s in walk])
+    assert all(p.can_stand(c) for c in xy)
+    left, right = xy[:, 0] < 3.9, xy[:, 0] > 4.1
+    assert left.sum() >= n / 3 and right.sum() >= n / 3
+    # through the doorway: photos near it face along the passage (+-x), not a wall
+    door = (np.abs(xy[:, 0] - 4.0) < 0.6) & (np.abs(xy[:, 1] - 1.5) < 0.5)
+    assert door.any()
+    assert all(abs(math.cos(walk[i].heading)) > 0.7 for i in np.flatnonzero(door))
+    # photos evenly spaced over the whole walk (a room's loop, the passage, the other's)
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    assert np.median(step) == pytest.approx(np.median(step[: n // 4]), rel=0.15)
+    assert step.max() < 4 * np.median(step)
+
+
 def test_resampling_a_closed_line_spaces_points_evenly():
     square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
     pts = resample_closed(square, 8)

@@ -47,6 +47,8 @@ RANSAC_TRIES = 300
 TANGENT_SPAN_M = 1.0
 """The walk's direction at a photo is taken over this much of it (m)."""
 """Cell size (m) of the person's map of where it can stand."""
+FOOT_RES_M = 0.05
+"""Cell size (m) of the grid the person finds its way between rooms on."""
 
 
 @dataclass
@@ -103,8 +105,8 @@ class SimPerson:
         fz = scene.floor_z
         self.map = ObstacleMap.build(scene, fz + BODY_BAND_M[0], fz + BODY_BAND_M[1], MAP_RES_M)
         top = float(scene.bounds[1][2]) - fz
-        self.walls = ObstacleMap.build(
-            scene, fz + WALL_BAND[0] * top, fz + WALL_BAND[1] * top, MAP_RES_M
+        self.walls = ObstacleMap.build(  # every room's walls (lintels close the doorways)
+            scene, fz + WALL_BAND[0] * top, fz + WALL_BAND[1] * top, MAP_RES_M, every_region=True
         )
         self.intrinsics = Intrinsics.from_hfov(camera.width, camera.height, camera.hfov_deg)
         self._renderer = None
@@ -259,23 +261,48 @@ def truth_record(pose: ShotPose) -> dict:
 
 def perimeter_walk(person: SimPerson, n: int, inset_m: float) -> list[ShotPose]:
     """Round 0 of a person (and the unguided baseline): ``n`` photos at even spacing along
-    the room's walls, ``inset_m`` from them, each facing into the room (square to the walls,
-    their direction taken over ``TANGENT_SPAN_M``) at eye height, level. Where furniture
-    stands on the walk, the person stands at the nearest free spot (within
+    the walls of every room, ``inset_m`` from them, each facing into its room (square to the
+    walls, their direction taken over ``TANGENT_SPAN_M``) at eye height, level; between two
+    rooms the person walks through the doorway, photographing ahead as it goes. Where
+    furniture stands on the walk, the person stands at the nearest free spot (within
     ``STEP_ASIDE_M``; farther, that photo is not taken).
 
-    The walk is the longest closed line at distance ``inset_m`` from the walls (the geometry
-    high up, ``WALL_BAND``: furniture stays below), sampled at ``n`` points evenly spaced by
-    arc length.
+    A room's walk is its closed line at distance ``inset_m`` from the walls (the geometry
+    high up, ``WALL_BAND``: furniture stays below; :func:`room_lines`). The rooms are walked
+    nearest first from the room the walk starts in (the scene's start, else the largest),
+    each from where the person came in; the photos are spaced evenly over the whole walk,
+    rooms and passages alike.
 
     Raises:
         ValueError: no such line (the room is narrower than twice ``inset_m``).
     """
-    line = perimeter_line(person.walls, inset_m)
+    lines = room_lines(person.walls, inset_m)
+    if len(lines) == 1:  # one room: its walk from the line's own start
+        return _loop_shots(person, lines[0], np.arange(n) * _length(lines[0], True) / n)
+    legs = _room_tour(person, lines)
+    step = sum(_length(leg, kind == "room") for kind, leg in legs) / n
+    out: list[ShotPose] = []
+    carried = 0.0  # walked since the last photo
+    for kind, leg in legs:
+        length = _length(leg, kind == "room")
+        at = np.arange(step - carried if carried else 0.0, length, step)
+        shots = _loop_shots if kind == "room" else _passage_shots
+        out += shots(person, leg, at)
+        carried = length - at[-1] if len(at) else carried + length
+    return out[:n]
+
+
+def _length(line: np.ndarray, closed: bool) -> float:
+    """Arc length (m) of the line (K, 2), closed (a room's walk) or open (a passage)."""
+    pts = np.vstack([line, line[:1]]) if closed else line
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+
+
+def _loop_shots(person: SimPerson, line: np.ndarray, at: np.ndarray) -> list[ShotPose]:
+    """Photos at arc lengths ``at`` along the closed line ``line``, facing into the room."""
     closed = np.vstack([line, line[:1]])
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
     length = s[-1]
-    at = np.arange(n) * length / n
 
     def point(u: np.ndarray) -> np.ndarray:
         u = np.mod(u, length)
@@ -287,29 +314,157 @@ def perimeter_walk(person: SimPerson, n: int, inset_m: float) -> list[ShotPose]:
     x, y = closed[:-1, 0], closed[:-1, 1]
     ccw = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) > 0
     inward = np.column_stack([-tangent[:, 1], tangent[:, 0]]) * (1.0 if ccw else -1.0)
+    return _standing(person, pts, np.arctan2(inward[:, 1], inward[:, 0]))
+
+
+def _passage_shots(person: SimPerson, line: np.ndarray, at: np.ndarray) -> list[ShotPose]:
+    """Photos at arc lengths ``at`` along the open line ``line``, facing the way it goes."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+
+    def point(u: np.ndarray) -> np.ndarray:
+        u = np.clip(u, 0.0, s[-1])
+        return np.column_stack([np.interp(u, s, line[:, 0]), np.interp(u, s, line[:, 1])])
+
+    half = TANGENT_SPAN_M / 2
+    ahead = point(at + half) - point(at - half)
+    return _standing(person, point(at), np.arctan2(ahead[:, 1], ahead[:, 0]))
+
+
+def _standing(person: SimPerson, pts: np.ndarray, headings: np.ndarray) -> list[ShotPose]:
     z = person.scene.floor_z + person.eye_height_m
     out = []
-    for p, d in zip(pts, inward, strict=True):
+    for p, h in zip(pts, headings, strict=True):
         stand = person.nearest_standable(p)
         if stand is not None:
-            out.append(ShotPose(np.array([stand[0], stand[1], z]), math.atan2(d[1], d[0]), 0.0))
+            out.append(ShotPose(np.array([stand[0], stand[1], z]), float(h), 0.0))
     return out
 
 
-def perimeter_line(obstacles: ObstacleMap, inset_m: float) -> np.ndarray:
-    """(K, 2) world xy of the longest closed line at clearance ``inset_m`` (m)."""
+def _room_tour(person: SimPerson, lines: list[np.ndarray]) -> list[tuple[str, np.ndarray]]:
+    """The walk through every room: legs ``("room", closed line)`` and ``("pass", open
+    line)`` in walking order. The first room holds the scene's start (else it is the
+    longest line), from the point nearest it; round each room back to where the person came
+    in, then on to the room nearest on foot from there (the person's map of where it fits,
+    :meth:`SimPerson.can_stand`), entered where the passage arrives. A room no passage
+    reaches is left out."""
+    grid = _FootGrid(person)
+    start = person.scene.start
+    here, entry = 0, 0
+    if start is not None:
+        d = [np.linalg.norm(ln - [start.x, start.y], axis=1) for ln in lines]
+        here = int(np.argmin([x.min() for x in d]))
+        entry = int(np.argmin(d[here]))
+    legs: list[tuple[str, np.ndarray]] = []
+    left = set(range(len(lines))) - {here}
+    while True:  # round the room back to where it came in, then on to the nearest room
+        legs.append(("room", np.roll(lines[here], -entry, axis=0)))
+        if not left:
+            break
+        best = grid.nearest(lines[here][entry : entry + 1], [lines[k] for k in sorted(left)])
+        if best is None:
+            break
+        k, path, entry = best
+        here = sorted(left)[k]
+        left.discard(here)
+        legs.append(("pass", path))
+    return legs
+
+
+class _FootGrid:
+    """Where the person can walk, on a coarse grid (``FOOT_RES_M``), for the passages."""
+
+    def __init__(self, person: SimPerson):
+        m = person.map
+        k = max(1, round(FOOT_RES_M / m.res))
+        h, w = (np.array(m.clearance.shape) // k) * k
+        c = m.clearance[:h, :w].reshape(h // k, k, w // k, k).min(axis=(1, 3))
+        self.free = c >= person.cfg.clearance_m
+        self.res = m.res * k
+        self.origin = m.origin
+
+    def _cells(self, xy: np.ndarray) -> np.ndarray:
+        ij = np.floor((np.asarray(xy, float) - self.origin) / self.res).astype(int)
+        ij[:, 0] = np.clip(ij[:, 0], 0, self.free.shape[1] - 1)
+        ij[:, 1] = np.clip(ij[:, 1], 0, self.free.shape[0] - 1)
+        return ij[:, 1] * self.free.shape[1] + ij[:, 0]
+
+    def nearest(self, src: np.ndarray, targets: list[np.ndarray]):
+        """The target line nearest ``src`` on foot: (its index, the path (P, 2) world xy
+        from ``src`` to it, the index of the target line's point it arrives at); None when
+        no target is reachable."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import dijkstra
+
+        ny, nx = self.free.shape
+        idx = np.arange(ny * nx).reshape(ny, nx)
+        rows, cols, wts = [], [], []
+        for dj, di, wgt in ((0, 1, 1.0), (1, 0, 1.0), (1, 1, 2**0.5), (1, -1, 2**0.5)):
+            a = self.free[: ny - dj, max(0, -di) : nx - max(0, di)]
+            b = self.free[dj:, max(0, di) : nx - max(0, -di) or None]
+            ok = a & b
+            ia = idx[: ny - dj, max(0, -di) : nx - max(0, di)][ok]
+            ib = idx[dj:, max(0, di) : nx - max(0, -di) or None][ok]
+            rows += [ia, ib]
+            cols += [ib, ia]
+            wts += [np.full(len(ia), wgt)] * 2
+        g = coo_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(ny * nx,) * 2).tocsr()  # fmt: skip
+        srcs = np.unique(self._cells(src))
+        srcs = srcs[self.free.ravel()[srcs]]
+        if not len(srcs):
+            return None
+        dist, pred, _ = dijkstra(g, indices=srcs, min_only=True, return_predecessors=True)
+        best = None
+        for k, line in enumerate(targets):
+            cells = self._cells(line)
+            d = dist[cells]
+            j = int(np.argmin(d))
+            if np.isfinite(d[j]) and (best is None or d[j] < best[0]):
+                best = (float(d[j]), k, cells[j], j)
+        if best is None:
+            return None
+        _, k, cell, j = best
+        chain = [cell]
+        while pred[chain[-1]] >= 0:
+            chain.append(pred[chain[-1]])
+        chain = np.array(chain[::-1])
+        xy = self.origin + (np.column_stack([chain % nx, chain // nx]) + 0.5) * self.res
+        return k, xy, j
+
+
+def room_lines(obstacles: ObstacleMap, inset_m: float) -> list[np.ndarray]:
+    """(K, 2) world xy of every room's closed line at clearance ``inset_m`` (m), longest
+    first: the lines that enclose space the person can be in (a line around a solid, a
+    pillar, encloses none).
+
+    Raises:
+        ValueError: no such line (the rooms are narrower than twice ``inset_m``).
+    """
     import contourpy
+    import cv2
 
     z = obstacles.clearance
     gen = contourpy.contour_generator(z=z, line_type=contourpy.LineType.Separate)
     lines = [ln for ln in gen.lines(inset_m) if len(ln) >= 4]
-    if not lines:
+    rooms = []
+    for ln in lines:
+        inside = np.zeros(z.shape, np.uint8)
+        cv2.fillPoly(inside, [np.round(ln).astype(np.int32).reshape(-1, 1, 2)], 1)
+        inside = inside.astype(bool)
+        if inside.any() and np.mean(z[inside] > inset_m) > 0.5:
+            rooms.append(ln)
+    if not rooms:
         raise ValueError(
             f"no walk at person_sim.perimeter_inset_m = {inset_m} m from the walls: the room "
             "is narrower; lower it"
         )
-    best = max(lines, key=lambda ln: float(np.sum(np.linalg.norm(np.diff(ln, axis=0), axis=1))))
-    return obstacles.origin + best * obstacles.res  # (col, row) -> (x, y)
+    rooms.sort(key=lambda ln: -float(np.sum(np.linalg.norm(np.diff(ln, axis=0), axis=1))))
+    return [obstacles.origin + ln * obstacles.res for ln in rooms]  # (col, row) -> (x, y)
+
+
+def perimeter_line(obstacles: ObstacleMap, inset_m: float) -> np.ndarray:
+    """(K, 2) world xy of the longest room's closed line at clearance ``inset_m`` (m)."""
+    return room_lines(obstacles, inset_m)[0]
 
 
 def resample_closed(line: np.ndarray, n: int) -> np.ndarray:

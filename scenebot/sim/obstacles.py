@@ -58,8 +58,13 @@ class ObstacleMap:
     nearest: np.ndarray
 
     @staticmethod
-    def build(scene: SceneMesh, z_min: float, z_max: float, res: float = 0.005) -> ObstacleMap:
-        """Rasterize the geometry between heights ``z_min`` and ``z_max`` (m, absolute)."""
+    def build(
+        scene: SceneMesh, z_min: float, z_max: float, res: float = 0.005, every_region=False
+    ) -> ObstacleMap:
+        """Rasterize the geometry between heights ``z_min`` and ``z_max`` (m, absolute).
+
+        ``every_region``: keep every free region (rooms closed off from each other within
+        the band, as lintels close doorways high up), not only the largest."""
         lo, hi = scene.bounds
         origin = lo[:2] - 0.1
         shape = np.ceil((hi[:2] + 0.1 - origin) / res).astype(int) + 1
@@ -85,7 +90,9 @@ class ObstacleMap:
         # solids (a box whose top is above the band rasterizes as its outline only) or the
         # outside of the room. Nothing can drive there: mark them occupied.
         n, labels = cv2.connectedComponents((occ == 0).astype(np.uint8), connectivity=4)
-        if n > 1:
+        if every_region:
+            occupied = occ.astype(bool)
+        elif n > 1:
             counts = np.bincount(labels[occ == 0].ravel(), minlength=n)
             occupied = labels != int(np.argmax(counts))
         else:
