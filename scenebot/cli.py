@@ -171,7 +171,7 @@ def cmd_guide_serve(args) -> int:
 
 def cmd_guide_skip(args) -> int:
     from scenebot.artifacts import inbox_dir, round_dir
-    from scenebot.capture.person import write_skipped
+    from scenebot.artifacts.skipped import write_skipped
     from scenebot.guide.serve import current_round
 
     cfg = _config(args)

@@ -186,3 +186,27 @@ def test_serve_binds_to_localhost_unless_told(monkeypatch, scene, capsys):
     cli.main(["guide", "serve", "--config", str(cfg), "--scene-dir", str(scene), "--host",
               "0.0.0.0", "--port", "0", "--round", "0"])  # fmt: skip
     assert (seen["host"], seen["port"], seen["round"]) == ("0.0.0.0", 0, 0)
+
+
+def test_a_shot_the_person_cannot_take_is_marked_in_the_inbox(client, scene):
+    """The page's "I cannot take this shot": POST /skip writes the inbox's skipped.json
+    (the next round plans others); a shot the guide does not have is refused, naming its
+    shots; /api/status lists the marked shots."""
+    goals = {"goals": [{"rank": k, "x": 0.0, "y": 0.0, "theta": 0.0} for k in range(3)]}
+    (scene / "round_001" / "goals.json").write_text(json.dumps(goals))
+    r = client.post("/skip", json={"shot": 2})
+    assert r.status_code == 200 and r.get_json()["skipped"] == [2]
+    assert "shot 2 marked as not taken" in r.get_json()["message"]
+    r = client.post("/skip", data={"shot": "0", "reason": "behind the sofa"})
+    assert r.status_code == 200 and r.get_json()["skipped"] == [0, 2]
+    box = scene / "round_002" / "capture" / "inbox"
+    assert json.loads((box / "skipped.json").read_text())["shots"] == [
+        {"rank": 0, "reason": "behind the sofa"},
+        {"rank": 2, "reason": "marked on the guide page"},
+    ]
+    for bad in ({"shot": 7}, {"shot": "x"}, {}):
+        r = client.post("/skip", json=bad)
+        assert r.status_code == 400
+        assert "round_001's guide has no shot" in r.get_json()["error"]
+        assert "its shots are 0, 1, 2" in r.get_json()["error"]
+    assert client.get("/api/status").get_json()["skipped"] == [0, 2]

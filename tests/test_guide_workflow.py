@@ -115,6 +115,8 @@ def test_clicking_a_shot_highlights_it_on_the_map(guided_round, driver, tmp_path
         "return Array.from(document.querySelectorAll('img.preview')).map(i => i.naturalWidth)"
     )
     assert len(previews) == len(cards) and all(w > 0 for w in previews)
+    # "I cannot take this shot" needs guide serve: hidden from a file
+    assert not any(b.is_displayed() for b in driver.find_elements("css selector", ".skip"))
     print("screenshot:", _screenshot(driver, tmp_path, "guide_page.png"))
     assert not _errors(driver)
 
@@ -151,6 +153,12 @@ def test_an_upload_through_guide_serve_lands_in_the_inbox(guided_round, driver, 
         assert f"{photo.name}: saved" in text, text
         saved = scene / "round_001" / "capture" / "inbox" / photo.name
         assert saved.read_bytes() == photo.read_bytes()
+        # a shot the person cannot take, marked from its card, lands in the inbox's list
+        card = driver.find_element("id", "shot-0")
+        card.find_element("css selector", ".skip").click()
+        WebDriverWait(driver, 10).until(lambda d: "skipped" in card.get_attribute("class"))
+        skipped = json.loads((saved.parent / "skipped.json").read_text())["shots"]
+        assert [s["rank"] for s in skipped] == [0]
         print("screenshot:", _screenshot(driver, tmp_path, "guide_upload.png"))
         assert not _errors(driver)
     finally:

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenebot.artifacts.skipped import SKIPPED, read_skipped, write_skipped
 from scenebot.capture.session import (
     SESSION_LOG,
     SUPERSEDED,
@@ -48,9 +49,6 @@ log = logging.getLogger("scenebot.capture")
 INBOX = "inbox"
 PERSON_SIM_LOG = "person-sim.jsonl"
 """The simulated person's record of its shots, beside its photos in the inbox."""
-SKIPPED = "skipped.json"
-"""The shots of the guide the person could not take, in the inbox beside the photos
-(:func:`write_skipped`: ``scenebot guide skip``, ``guide serve``, the simulated person)."""
 
 
 class InboxError(RuntimeError):
@@ -61,33 +59,11 @@ class InboxError(RuntimeError):
 # ----------------------------------------------------------------------------- intake
 
 
-def read_skipped(inbox: Path) -> dict[int, str]:
-    """The shots the person said it could not take (``inbox/skipped.json``): rank (0-based,
-    as in goals.json) -> why; empty without the file."""
-    path = Path(inbox) / SKIPPED
-    if not path.is_file():
-        return {}
+def _read_skipped(inbox: Path) -> dict[int, str]:
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        return {int(s["rank"]): str(s.get("reason") or "") for s in doc.get("shots", [])}
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise InboxError(
-            f"{path} is not a list of skipped shots ({exc}): write it with python -m "
-            "scenebot guide skip, or delete it"
-        ) from exc
-
-
-def write_skipped(inbox: Path, shots: dict[int, str]) -> Path:
-    """Add shots the person could not take (rank -> why) to ``inbox/skipped.json``; a shot
-    already there keeps its first reason. Written whole or not at all."""
-    inbox = Path(inbox)
-    inbox.mkdir(parents=True, exist_ok=True)
-    merged = {**{int(k): v for k, v in shots.items()}, **read_skipped(inbox)}
-    doc = {"shots": [{"rank": k, "reason": merged[k]} for k in sorted(merged)]}
-    tmp = inbox / f".{SKIPPED}.{os.getpid()}.part"
-    tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, inbox / SKIPPED)
-    return inbox / SKIPPED
+        return read_skipped(inbox)
+    except ValueError as exc:
+        raise InboxError(str(exc)) from exc
 
 
 def photo_problem(path: Path) -> str | None:
@@ -275,7 +251,7 @@ def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
     inbox = capture_dir / INBOX
     guide = capture_dir.parent.parent / f"round_{round_index - 1:03d}" / "guide" / "index.html"
     files = photo_files(inbox)
-    skipped = read_skipped(inbox)
+    skipped = _read_skipped(inbox)
     if not files and skipped:
         return _skipped_round(cfg, capture_dir, round_index, inbox, skipped)
     if not files:

@@ -235,6 +235,7 @@ def _shot_card(k: int, shot: dict, preview_uri: str, photo_uri: str) -> str:
   <tr><td>{st["forward"]:.2f} {u}</td><td>{st["right"]:.2f} {u}</td><td>{st["up"]:.2f} {u}</td>
   <td>{st["distance"]:.2f} {u}</td><td>{st["turn_deg"]:.0f}°</td><td>{st["pitch_deg"]:.0f}°</td>
   </tr></table>
+ <button type="button" class="skip" data-skip="{k}" hidden>I cannot take this shot</button>
 </article>"""
 
 

@@ -6,7 +6,10 @@ takes back into the next round's inbox (Flask).
 * ``GET /api/status``: the round, the inbox and the upload limit (JSON; the page shows its
   upload form when this answers);
 * ``POST /upload``: photos (multipart form, any field name) into the inbox
-  (:func:`scenebot.artifacts.inbox_dir`: the next round's ``capture/inbox/``).
+  (:func:`scenebot.artifacts.inbox_dir`: the next round's ``capture/inbox/``);
+* ``POST /skip``: ``{"shot": N}`` (JSON or form): a shot the person cannot take, into the
+  inbox's ``skipped.json`` (:mod:`scenebot.artifacts.skipped`); the page's "I cannot take this
+  shot" button sends it, and ``/api/status`` lists the shots marked so.
 
 Each photo is checked before it is written (:func:`save_photo`): a plain file name (no
 folder), at most ``guide.max_upload_mb``, a JPEG or PNG that decodes. A photo is never
@@ -21,6 +24,7 @@ on the same network in, and anyone else on it).
 from __future__ import annotations
 
 import html
+import json
 import logging
 import os
 import re
@@ -30,6 +34,7 @@ from pathlib import Path
 from typing import IO
 
 from scenebot.artifacts import inbox_dir, round_dir
+from scenebot.artifacts.skipped import read_skipped, write_skipped
 from scenebot.guide.config import GuideConfig
 
 log = logging.getLogger(__name__)
@@ -251,8 +256,38 @@ def create_app(cfg: GuideConfig, scene_dir: Path, round_: int | None = None):
     def status():
         r, inbox = where()
         photos = sorted(p.name for p in inbox.iterdir()) if inbox.is_dir() else []
+        try:
+            skipped = sorted(read_skipped(inbox))
+        except ValueError as exc:
+            skipped, photos = [], [*photos, str(exc)]
         return jsonify(round=f"round_{r:03d}", inbox=inbox.as_posix() + "/",
-                       max_upload_mb=cfg.max_upload_mb, photos_in_inbox=photos)  # fmt: skip
+                       max_upload_mb=cfg.max_upload_mb, photos_in_inbox=photos,
+                       skipped=skipped)  # fmt: skip
+
+    @app.post("/skip")
+    def skip():
+        r, inbox = where()
+        body = request.get_json(silent=True) or request.form
+        goals = round_dir(scene_dir, r) / "goals.json"
+        ranks = sorted(g["rank"] for g in json.loads(goals.read_text(encoding="utf-8"))["goals"])
+        try:
+            rank = int(body.get("shot"))
+        except (TypeError, ValueError):
+            rank = None
+        if rank not in ranks:
+            msg = (f"round_{r:03d}'s guide has no shot {body.get('shot')!r}: its shots are "
+                   f"{', '.join(map(str, ranks))} (send {{\"shot\": N}})")  # fmt: skip
+            return jsonify(error=msg), 400
+        reason = str(body.get("reason") or "marked on the guide page")[:200]
+        try:
+            write_skipped(inbox, {rank: reason})
+            skipped = sorted(read_skipped(inbox))
+        except ValueError as exc:
+            return jsonify(error=str(exc)), 409
+        log.info("guide serve: shot %d of round_%03d marked as not taken", rank, r)
+        return jsonify(round=f"round_{r:03d}", skipped=skipped,
+                       message=f"shot {rank} marked as not taken: the next guide asks for "
+                       "another")  # fmt: skip
 
     @app.post("/upload")
     def upload():

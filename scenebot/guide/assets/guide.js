@@ -1,5 +1,6 @@
 // scenebot guide page: click a shot (its card or its frustum) to highlight it on the map,
-// with the photo to start from; served by `scenebot guide serve`, take photo uploads.
+// with the photo to start from; served by `scenebot guide serve`, take photo uploads and
+// mark shots the person cannot take.
 (function () {
   "use strict";
   var data = JSON.parse(document.getElementById("guide-data").textContent);
@@ -35,12 +36,36 @@
   if (!/^https?:$/.test(location.protocol) || !window.fetch) return;
   var form = document.getElementById("upload");
   var list = document.getElementById("upload-result");
+  function marked(rank) {  // a shot the person said it cannot take
+    var card = document.getElementById("shot-" + rank);
+    if (!card) return;
+    card.classList.add("skipped");
+    var b = card.querySelector(".skip");
+    b.disabled = true;
+    b.textContent = "Marked: not taken (the next guide asks for another)";
+  }
   fetch("api/status").then(function (r) { return r.ok ? r.json() : null; }).then(function (s) {
     if (!s) return;
     form.hidden = false;
     document.getElementById("upload-limit").textContent =
       "Photos go to " + s.inbox + " (JPEG or PNG, at most " + s.max_upload_mb + " MB each).";
+    document.querySelectorAll(".skip").forEach(function (b) { b.hidden = false; });
+    (s.skipped || []).forEach(marked);
   }).catch(function () {});
+  document.querySelectorAll(".skip").forEach(function (b) {
+    b.addEventListener("click", function (ev) {
+      ev.stopPropagation();
+      var rank = Number(b.getAttribute("data-skip"));
+      fetch("skip", {method: "POST", body: JSON.stringify({shot: rank}),
+                     headers: {"Content-Type": "application/json", "Accept": "application/json"}})
+        .then(function (r) { return r.json(); })
+        .then(function (res) {
+          if (res.error) { list.textContent = ""; say(res.error, false); return; }
+          (res.skipped || []).forEach(marked);
+        })
+        .catch(function (err) { say("Marking failed: " + err, false); });
+    });
+  });
   function say(text, ok) {
     var li = document.createElement("li");
     li.className = ok ? "ok" : "bad";
