@@ -263,7 +263,9 @@ def perimeter_walk(person: SimPerson, n: int, inset_m: float) -> list[ShotPose]:
     """Round 0 of a person (and the unguided baseline): ``n`` photos at even spacing along
     the walls of every room, ``inset_m`` from them, each facing into its room (square to the
     walls, their direction taken over ``TANGENT_SPAN_M``) at eye height, level; between two
-    rooms the person walks through the doorway, photographing ahead as it goes. Where
+    rooms the person walks through the doorway, photographing ahead as it goes, and in a
+    corridor (a room whose walk encloses a strip narrower than ``inset_m``:
+    :func:`_strip_width`) it photographs along it, up and back. Where
     furniture stands on the walk, the person stands at the nearest free spot (within
     ``STEP_ASIDE_M``; farther, that photo is not taken).
 
@@ -286,10 +288,21 @@ def perimeter_walk(person: SimPerson, n: int, inset_m: float) -> list[ShotPose]:
     for kind, leg in legs:
         length = _length(leg, kind == "room")
         at = np.arange(step - carried if carried else 0.0, length, step)
-        shots = _loop_shots if kind == "room" else _passage_shots
-        out += shots(person, leg, at)
+        if kind == "room" and _strip_width(leg) < inset_m:  # a corridor: photograph along it
+            out += _passage_shots(person, np.vstack([leg, leg[:1]]), at)
+        else:
+            out += (_loop_shots if kind == "room" else _passage_shots)(person, leg, at)
         carried = length - at[-1] if len(at) else carried + length
     return out[:n]
+
+
+def _strip_width(line: np.ndarray) -> float:
+    """Mean width (m) of the region a room's closed walk encloses (its area over half its
+    length): about 0 in a corridor, where the walk runs up one side of a thin strip and back
+    down the other, and a photo square to the wall would be a close-up of it."""
+    x, y = line[:, 0], line[:, 1]
+    area = 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
+    return 2 * area / max(_length(line, True), 1e-9)
 
 
 def _length(line: np.ndarray, closed: bool) -> float:
