@@ -349,3 +349,38 @@ def test_a_broken_skip_list_is_an_error_naming_it(scene, tmp_path):
     (inbox / "skipped.json").write_text("[1, 2]")
     with pytest.raises(InboxError, match=r"skipped\.json is not a list of skipped shots"):
         run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+
+
+def test_a_tape_between_photos_not_in_the_map_leaves_the_scale_unknown(tmp_path, caplog):
+    """The person's tape (the capture log's known_distance) between a photo that registered
+    and one that did not: the map is mapped without a metric scale, with a warning, instead
+    of the stage failing; between two registered photos it gives the scale."""
+    from types import SimpleNamespace
+
+    from scenebot.sfm.config import SfmConfig
+    from scenebot.sfm.photos import Photo
+    from scenebot.sfm.stage import _person_alignment
+
+    rec = pycolmap.synthesize_dataset(pycolmap.SyntheticDatasetOptions())
+    ids = sorted(rec.reg_image_ids())
+    for k, i in enumerate(ids):
+        rec.image(i).name = f"round_000/capture/images/r000_{k:04d}.jpg"
+    cap = tmp_path / "round_000" / "capture"
+    cap.mkdir(parents=True)
+    photos = [Photo(rec.image(i).name, None) for i in ids]
+
+    def align(other: str):
+        tape = {"type": "event", "event": "known_distance", "image_a": "images/r000_0000.jpg",
+                "image_b": other, "distance_m": 2.0}  # fmt: skip
+        (cap / "log.jsonl").write_text(json.dumps(tape) + "\n")
+        s = SimpleNamespace(cfg=SfmConfig(), photos=photos, names=[p.name for p in photos],
+                            capture_dirs=[cap])  # fmt: skip
+        return _person_alignment(s, SimpleNamespace(reconstruction=rec))
+
+    with caplog.at_level("WARNING"):
+        unknown = align("images/r000_0099.jpg")  # not in the map
+    assert "not both in the map: the map's scale is unknown" in caplog.text
+    metric = align("images/r000_0001.jpg")
+    c0, c1 = (rec.image(ids[k]).projection_center() for k in (0, 1))
+    assert metric.scale == pytest.approx(2.0 / np.linalg.norm(c1 - c0), rel=1e-6)
+    assert unknown.scale != pytest.approx(metric.scale)

@@ -847,10 +847,21 @@ def _person_alignment(
     kd = s.cfg.known_distance
     known = (kd.image_a, kd.image_b, kd.distance_m) if kd else None
     up = s.cfg.up_photo
+    tape = _person_known_distance(s, known)
+    if tape is not None and known is None:  # the logged tape: its photos may not be in the map
+        rec = mres.reconstruction
+        registered = {rec.image(i).name for i in rec.reg_image_ids()}
+        if not {tape[0], tape[1]} <= registered:
+            log.warning(
+                "the tape measured between %s and %s (the capture log's known_distance), "
+                "not both in the map: the map's scale is unknown (set sfm.known_distance "
+                "between two photos that registered)", tape[0], tape[1],
+            )  # fmt: skip
+            tape = None
     return person_frame_transform(
         mres.reconstruction,
         s.photos,
-        known_distance=_person_known_distance(s, known),
+        known_distance=tape,
         up_photo=(_person_photo_name(s, up.image), up.side) if up else None,
         standing_up=standing_up,
     )
