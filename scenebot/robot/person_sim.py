@@ -39,6 +39,7 @@ STEP_ASIDE_M = 1.5
 """A spot of the walk inside furniture moves to the nearest spot the person fits, at most
 this far (m); else the photo is not taken."""
 MAP_RES_M = 0.01
+"""Cell size (m) of the person's map of where it can stand."""
 RECOGNISE_M = 0.25
 """A photo of the map agrees with the person's reading when it lies within this (m) of where
 the person truly took it."""
@@ -46,7 +47,6 @@ RANSAC_TRIES = 300
 """Minimal sets of three photos tried when reading the map."""
 TANGENT_SPAN_M = 1.0
 """The walk's direction at a photo is taken over this much of it (m)."""
-"""Cell size (m) of the person's map of where it can stand."""
 FOOT_RES_M = 0.05
 """Cell size (m) of the grid the person finds its way between rooms on."""
 
@@ -473,11 +473,6 @@ def room_lines(obstacles: ObstacleMap, inset_m: float) -> list[np.ndarray]:
         )
     rooms.sort(key=lambda ln: -float(np.sum(np.linalg.norm(np.diff(ln, axis=0), axis=1))))
     return [obstacles.origin + ln * obstacles.res for ln in rooms]  # (col, row) -> (x, y)
-
-
-def perimeter_line(obstacles: ObstacleMap, inset_m: float) -> np.ndarray:
-    """(K, 2) world xy of the longest room's closed line at clearance ``inset_m`` (m)."""
-    return room_lines(obstacles, inset_m)[0]
 
 
 def resample_closed(line: np.ndarray, n: int) -> np.ndarray:
