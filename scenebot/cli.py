@@ -170,21 +170,14 @@ def cmd_guide_serve(args) -> int:
 
 
 def cmd_guide_skip(args) -> int:
-    from scenebot.artifacts import inbox_dir, round_dir
+    from scenebot.artifacts import inbox_dir
     from scenebot.artifacts.skipped import write_skipped
-    from scenebot.guide.serve import current_round
+    from scenebot.guide.serve import check_shots, current_round
 
     cfg = _config(args)
     scene_dir = Path(args.scene_dir) if args.scene_dir else Path("results") / cfg.scene
     rnd = current_round(scene_dir, args.round)
-    goals = round_dir(scene_dir, rnd) / "goals.json"
-    ranks = {g["rank"] for g in json.loads(goals.read_text(encoding="utf-8"))["goals"]}
-    wrong = sorted(set(args.shots) - ranks)
-    if wrong:
-        raise ValueError(
-            f"{goals} has no shot {', '.join(map(str, wrong))}: its shots are "
-            f"{', '.join(map(str, sorted(ranks)))} (the numbers on its guide page)"
-        )
+    check_shots(scene_dir, rnd, sorted(set(args.shots)))
     path = write_skipped(inbox_dir(scene_dir, rnd), {k: args.reason for k in args.shots})
     print(f"{path}: shots {', '.join(map(str, sorted(args.shots)))} of round {rnd}'s guide "
           "marked as not taken; run snakemake: the next guide asks for others")  # fmt: skip

@@ -81,13 +81,19 @@ def _angle_deg(a: float) -> float:
     return abs(math.degrees(math.remainder(a, 2 * math.pi)))
 
 
+def _moved(sim, x: float, y: float, z: float) -> np.ndarray:
+    """The point (x, y, z) moved by the similarity ``sim`` = (s, R, t)."""
+    s, R, t = sim
+    return s * R @ np.array([x, y, z], float) + t
+
+
 def shots_in_frame(goals: list[dict], sim) -> list[dict]:
     """The shots (goals.json: x, y, z, theta, pitch) moved by the similarity ``sim`` =
     (s, R, t): ``rank``, ``center`` (3,), ``heading`` and ``pitch`` (rad)."""
-    s, R, t = sim
+    R = sim[1]
     out = []
     for g in goals:
-        c = s * R @ np.array([g["x"], g["y"], g.get("z", 0.0)], float) + t
+        c = _moved(sim, g["x"], g["y"], g.get("z", 0.0))
         h, p = _heading_pitch(R @ view_direction(g["theta"], g.get("pitch", 0.0)))
         out.append({"rank": g["rank"], "center": c, "heading": h, "pitch": p})
     return out
@@ -98,10 +104,9 @@ def carried_unfulfilled(path: Path | None, sim) -> list[dict]:
     round's by the similarity ``sim`` = (s, R, t); none without the file."""
     if path is None or not Path(path).is_file():
         return []
-    s, R, t = sim
     out = []
     for u in json.loads(Path(path).read_text(encoding="utf-8")).get("unfulfilled", []):
-        c = s * R @ np.array([u["x"], u["y"], u.get("z", 0.0)], float) + t
+        c = _moved(sim, u["x"], u["y"], u.get("z", 0.0))
         out.append({**u, "x": float(c[0]), "y": float(c[1]), "z": float(c[2])})
     return out
 

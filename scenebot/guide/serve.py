@@ -62,6 +62,20 @@ def guide_rounds(scene_dir: Path) -> list[int]:
     return sorted(out)
 
 
+def check_shots(scene_dir: Path, r: int, shots: list, shown: str | None = None) -> None:
+    """Whether round ``r``'s guide (its goals.json) has the ``shots`` (ranks, the numbers on
+    its page). Raises ValueError naming the ones it lacks (``shown``: as the person gave
+    them) and its shots."""
+    goals = round_dir(scene_dir, r) / "goals.json"
+    ranks = sorted(g["rank"] for g in json.loads(goals.read_text(encoding="utf-8"))["goals"])
+    wrong = [k for k in shots if k not in ranks]
+    if wrong:
+        raise ValueError(
+            f"round_{r:03d}'s guide has no shot {shown or ', '.join(map(str, wrong))}: its "
+            f"shots are {', '.join(map(str, ranks))} (the numbers on its guide page)"
+        )
+
+
 def current_round(scene_dir: Path, round_: int | None = None) -> int:
     """The round whose guide is served: ``round_``, else the latest with a guide page.
 
@@ -268,16 +282,14 @@ def create_app(cfg: GuideConfig, scene_dir: Path, round_: int | None = None):
     def skip():
         r, inbox = where()
         body = request.get_json(silent=True) or request.form
-        goals = round_dir(scene_dir, r) / "goals.json"
-        ranks = sorted(g["rank"] for g in json.loads(goals.read_text(encoding="utf-8"))["goals"])
         try:
             rank = int(body.get("shot"))
         except (TypeError, ValueError):
             rank = None
-        if rank not in ranks:
-            msg = (f"round_{r:03d}'s guide has no shot {body.get('shot')!r}: its shots are "
-                   f"{', '.join(map(str, ranks))} (send {{\"shot\": N}})")  # fmt: skip
-            return jsonify(error=msg), 400
+        try:
+            check_shots(scene_dir, r, [rank], shown=repr(body.get("shot")))
+        except ValueError as exc:
+            return jsonify(error=f'{exc}; send {{"shot": N}}'), 400
         reason = str(body.get("reason") or "marked on the guide page")[:200]
         try:
             write_skipped(inbox, {rank: reason})

@@ -394,19 +394,11 @@ class _FootGrid:
         self.free = c >= person.cfg.clearance_m
         self.res = m.res * k
         self.origin = m.origin
+        self.graph = self._graph()
 
-    def _cells(self, xy: np.ndarray) -> np.ndarray:
-        ij = np.floor((np.asarray(xy, float) - self.origin) / self.res).astype(int)
-        ij[:, 0] = np.clip(ij[:, 0], 0, self.free.shape[1] - 1)
-        ij[:, 1] = np.clip(ij[:, 1], 0, self.free.shape[0] - 1)
-        return ij[:, 1] * self.free.shape[1] + ij[:, 0]
-
-    def nearest(self, src: np.ndarray, targets: list[np.ndarray]):
-        """The target line nearest ``src`` on foot: (its index, the path (P, 2) world xy
-        from ``src`` to it, the index of the target line's point it arrives at); None when
-        no target is reachable."""
+    def _graph(self):
+        """The free cells' 8-neighbour graph (edge weights in cells), sparse."""
         from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import dijkstra
 
         ny, nx = self.free.shape
         idx = np.arange(ny * nx).reshape(ny, nx)
@@ -420,13 +412,27 @@ class _FootGrid:
             rows += [ia, ib]
             cols += [ib, ia]
             wts += [np.full(len(ia), wgt)] * 2
-        g = coo_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(ny * nx,) * 2).tocsr()  # fmt: skip
+        return coo_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(ny * nx,) * 2).tocsr()  # fmt: skip
+
+    def _cells(self, xy: np.ndarray) -> np.ndarray:
+        ij = np.floor((np.asarray(xy, float) - self.origin) / self.res).astype(int)
+        ij[:, 0] = np.clip(ij[:, 0], 0, self.free.shape[1] - 1)
+        ij[:, 1] = np.clip(ij[:, 1], 0, self.free.shape[0] - 1)
+        return ij[:, 1] * self.free.shape[1] + ij[:, 0]
+
+    def nearest(self, src: np.ndarray, targets: list[np.ndarray]):
+        """The target line nearest ``src`` on foot: (its index, the path (P, 2) world xy
+        from ``src`` to it, the index of the target line's point it arrives at); None when
+        no target is reachable."""
+        from scipy.sparse.csgraph import dijkstra
+
+        nx = self.free.shape[1]
         srcs = np.unique(self._cells(src))
         srcs = srcs[self.free.ravel()[srcs]]
         if not len(srcs):
             return None
-        dist, pred, _ = dijkstra(g, indices=srcs, min_only=True, return_predecessors=True)
+        dist, pred, _ = dijkstra(self.graph, indices=srcs, min_only=True, return_predecessors=True)
         best = None
         for k, line in enumerate(targets):
             cells = self._cells(line)

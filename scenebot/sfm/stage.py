@@ -544,7 +544,7 @@ def _round_without_photos(inputs: SfmInputs, outputs: SfmOutputs) -> dict | None
     if not log_path.is_file() or photo_records(log_path):
         return None
     prev, out = Path(inputs.previous_model), Path(outputs.model_dir)
-    _read_previous(prev)  # SfmError without a model
+    _check_previous(prev)
     out.mkdir(parents=True, exist_ok=True)
     for f in out.glob("*.bin"):
         f.unlink()
@@ -615,9 +615,14 @@ def _read_previous(previous_model: Path | None) -> pycolmap.Reconstruction | Non
     if previous_model is None:
         return None
     prev_dir = Path(previous_model)
+    _check_previous(prev_dir)
+    return pycolmap.Reconstruction(str(prev_dir))
+
+
+def _check_previous(prev_dir: Path) -> None:
+    """SfmError when round r-1's folder holds no COLMAP model."""
     if not all((prev_dir / f).is_file() for f in MODEL_FILES):
         raise SfmError(f"previous model {prev_dir} has no COLMAP model ({', '.join(MODEL_FILES)})")
-    return pycolmap.Reconstruction(str(prev_dir))
 
 
 def _features_and_pairs(s: _Session) -> tuple[dict, dict]:
