@@ -238,3 +238,42 @@ def test_a_photo_is_rendered_with_its_truth(scene, tmp_path):
     assert np.allclose(R[2], view_direction(0.0, math.radians(10)))  # roll keeps the axis
     with pytest.raises(Exception, match="exists"):
         p.take(pose, tmp_path / "a.jpg")  # never over a photo
+
+
+def _tracked(rec: dict) -> tuple[np.ndarray, np.ndarray]:
+    m = rec["motion"]
+    return np.array(m["center"]), np.array(m["R_cam_from_session"])
+
+
+def test_the_phones_motion_is_the_walk_in_its_own_frame_with_its_drift(scene):
+    """The tracked poses are the true ones in a level frame of the session's own heading and
+    origin: relative poses match the truth, up to a drift near motion_drift of the distance
+    walked; none without tracking (motion_drift null); the orientation records unchanged."""
+    from scenebot.robot.person_sim import orientation_record, phone_motion
+
+    rng = np.random.default_rng(5)
+    walk = [ShotPose(np.array([0.5 + 0.1 * k, 1.0 + 0.02 * k, 1.5]), rng.uniform(-3, 3), 0.0)
+            for k in range(30)]  # fmt: skip
+    exact = phone_motion(person(scene, motion_drift=0.0), "round_000")
+    recs = [exact.record(p) for p in walk]
+    c0, R0 = _tracked(recs[0])
+    assert np.allclose(c0, 0.0) and recs[0]["motion"]["walked_m"] == 0.0
+    for p, rec in zip(walk, recs, strict=True):
+        c, R = _tracked(rec)
+        assert np.allclose(R @ R.T, np.eye(3), atol=1e-6)
+        assert R[2, :] @ [0, 0, 1] == pytest.approx(p.rotation()[2] @ [0, 0, 1], abs=1e-6)
+        # the relative pose of the first photo and this one is the true one
+        assert np.allclose(R @ R0.T, p.rotation() @ walk[0].rotation().T, atol=1e-5)
+        assert np.allclose(R @ (c0 - c), p.rotation() @ (walk[0].center - p.center), atol=1e-4)
+    assert recs[-1]["motion"]["walked_m"] == pytest.approx(29 * math.hypot(0.1, 0.02), rel=1e-3)
+    errors = []
+    for seed in range(20):
+        drifting = phone_motion(person(scene, seed=seed, motion_drift=0.02), "round_000")
+        c = [_tracked(drifting.record(p))[0] for p in walk]
+        true = np.linalg.norm(walk[-1].center - walk[0].center)
+        errors.append(abs(np.linalg.norm(c[-1] - c[0]) - true))
+    assert 0.0 < np.median(errors) < 3 * 0.02 * 29 * 0.102  # of the 2.96 m walked
+    assert phone_motion(person(scene, motion_drift=None), "round_000") is None
+    with_tracking, without = person(scene, seed=3), person(scene, seed=3, motion_drift=None)
+    phone_motion(with_tracking, "round_000").record(walk[1])
+    assert orientation_record(with_tracking, walk[0]) == orientation_record(without, walk[0])

@@ -262,7 +262,7 @@ def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
         for rec in read_log(sim_log):
             if rec.get("image"):
                 extra[rec["image"]] = {
-                    k: rec[k] for k in ("orientation", "truth", "aimed_shot") if k in rec
+                    k: rec[k] for k in ("orientation", "motion", "truth", "aimed_shot") if k in rec
                 }
     events = [_skipped_event(skipped)] if skipped else []
     return _take_in(cfg, capture_dir, round_index, files, inbox, extra, guide, events)
@@ -328,12 +328,13 @@ def run_perimeter_round(cfg: Config, capture_dir: Path) -> dict:
     (:func:`~scenebot.robot.person_sim.perimeter_walk`), each photo taken with the person's
     error, logged with its truth; the session record holds the tape measurement between
     ``person_sim.tape_photos`` (``known_distance``: the map's metric scale)."""
-    from scenebot.robot.person_sim import orientation_record, perimeter_walk
+    from scenebot.robot.person_sim import orientation_record, perimeter_walk, phone_motion
 
     capture_dir = Path(capture_dir)
     ps = cfg.person_sim
     person = _person(cfg, 0)
     walk = perimeter_walk(person, ps.perimeter_photos, ps.perimeter_inset_m)
+    motion = phone_motion(person, "round_000")
     with capture_lock(capture_dir):
         start_capture(capture_dir)
         taken = []
@@ -347,7 +348,8 @@ def run_perimeter_round(cfg: Config, capture_dir: Path) -> dict:
                 taken.append((image, pose))
                 clog.write({"type": "photo", "t": float(i), "index": i, "image": image,
                             "sha256": sha256_of(capture_dir / image),
-                            **orientation_record(person, pose), "truth": truth})  # fmt: skip
+                            **orientation_record(person, pose),
+                            **(motion.record(pose) if motion else {}), "truth": truth})  # fmt: skip
             tape = _tape(person, taken, ps)
             if tape is not None:
                 clog.write({"type": "event", "t": float(len(taken)), "event": "known_distance",
@@ -381,7 +383,12 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
     attempt's photos in the inbox move to ``capture/superseded/<time>/inbox/``.
     """
     from scenebot.geometry import read_sparse_map
-    from scenebot.robot.person_sim import map_to_world, orientation_record, shot_in_world
+    from scenebot.robot.person_sim import (
+        map_to_world,
+        orientation_record,
+        phone_motion,
+        shot_in_world,
+    )
 
     scene_dir = Path(scene_dir)
     prev = scene_dir / f"round_{round_index - 1:03d}"
@@ -399,6 +406,7 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
     sim = map_to_world(smap.centres[both], np.array([truths[smap.names[i]] for i in both]))
     person = _person(cfg, round_index)
     ps = cfg.person_sim
+    motion = phone_motion(person, f"round_{round_index:03d}")
     _archive_inbox(capture_dir)
     inbox.mkdir(parents=True, exist_ok=True)
     records, n = [], 0
@@ -417,7 +425,9 @@ def run_person_sim_shots(cfg: Config, scene_dir: Path, round_index: int) -> dict
                 name = f"person_r{round_index:03d}_{n:03d}.jpg"
                 truth = person.take(shot.taken, inbox / name)
                 truth["aimed"] = rec["aimed"]
-                rec |= {"image": name, **orientation_record(person, shot.taken), "truth": truth}
+                tracked = motion.record(shot.taken) if motion else {}
+                rec |= {"image": name, **orientation_record(person, shot.taken), **tracked,
+                        "truth": truth}  # fmt: skip
                 n += 1
             records.append(rec)
     skipped = [r for r in records if "skipped" in r]

@@ -63,6 +63,15 @@ class PersonSimConfig(Settings):
         "heading with this standard deviation (deg; a phone's compass indoors: 5-15); null: "
         "a phone that records none.",
     )
+    motion_drift: float | None = Field(
+        0.01,
+        ge=0,
+        description="The phone tracks its own motion (visual-inertial odometry, as ARKit and "
+        "ARCore do) and records each photo's camera pose in its session's frame (the capture "
+        "log's `motion`; one session per round), drifting by this fraction of the distance "
+        "walked (position, per axis; the heading as many radians per metre); null: a phone "
+        "that records none. Phones drift 1-3% indoors.",
+    )
     gravity_std_deg: float = Field(
         1.0, ge=0, description="Standard deviation (deg) of the phone's pitch and roll readings."
     )

@@ -100,6 +100,7 @@ class SimPerson:
         # the phone's sensors draw from their own stream: the person's other errors stay the
         # same with or without them
         self.sensor_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        self.motion_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[1])
         lo, hi = cfg.eye_height_m
         self.eye_height_m = float(np.random.default_rng([eye_seed, 7]).uniform(lo, hi))
         fz = scene.floor_z
@@ -242,6 +243,63 @@ def orientation_record(person: SimPerson, pose: ShotPose) -> dict:
             "roll_deg": math.degrees(pose.roll) + float(rng.normal(0, cfg.gravity_std_deg)),
         }
     }
+
+
+class PhoneMotion:
+    """The phone's own tracking of its motion (visual-inertial odometry, as ARKit and ARCore
+    give it): each photo's camera pose in the session's frame, which is level (gravity) with
+    an arbitrary heading and its origin where the session began. One session per round (the
+    person opens the capture app again): poses of two sessions are not comparable. It drifts
+    as a person walks, by about ``person_sim.motion_drift`` of the distance walked: each
+    step is tracked with a scale error (drawn once per session, that standard deviation),
+    turned by the tracked heading's error (a random walk of that many radians per square
+    root metre) and with a random error of that fraction of its length (per axis, half that
+    vertically); ``walked_m`` is the length of the session's track so far."""
+
+    def __init__(self, drift: float, rng: np.random.Generator, session: str):
+        self.drift, self.rng, self.session = drift, rng, session
+        self.yaw = float(rng.uniform(-math.pi, math.pi))  # the session frame's heading
+        self.scale = 1.0 + float(rng.normal(0.0, drift))
+        self.last: np.ndarray | None = None
+        self.center = np.zeros(3)  # tracked, in the session's frame
+        self.yaw_error = 0.0
+        self.walked = 0.0
+
+    def _turn(self, yaw: float) -> np.ndarray:
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    def record(self, pose: ShotPose) -> dict:
+        """The photo record's ``motion``: ``session``, ``center`` (m) and ``R_cam_from_session``
+        of the camera in the session's frame, ``walked_m``."""
+        c = np.asarray(pose.center, float)
+        if self.last is not None:
+            step = c - self.last
+            length = float(np.linalg.norm(step))
+            self.walked += length
+            self.yaw_error += float(self.rng.normal(0.0, self.drift * math.sqrt(length)))
+            noise = self.rng.normal(0.0, self.drift * length, 3) * [1.0, 1.0, 0.5]
+            self.center = (
+                self.center + self.scale * (self._turn(self.yaw + self.yaw_error) @ step) + noise
+            )
+        self.last = c
+        R = pose.rotation() @ self._turn(self.yaw + self.yaw_error).T
+        return {
+            "motion": {
+                "session": self.session,
+                "center": [round(float(v), 5) for v in self.center],
+                "R_cam_from_session": [[round(float(v), 7) for v in row] for row in R],
+                "walked_m": round(self.walked, 4),
+            }
+        }
+
+
+def phone_motion(person: SimPerson, session: str) -> PhoneMotion | None:
+    """The phone's motion tracking for one session (a round), or None for a phone without
+    (``person_sim.motion_drift`` null)."""
+    if person.cfg.motion_drift is None:
+        return None
+    return PhoneMotion(person.cfg.motion_drift, person.motion_rng, session)
 
 
 def truth_record(pose: ShotPose) -> dict:

@@ -216,6 +216,52 @@ class SfmConfig(Settings):
             "(the office at 320 x 240, 32 photos) go too and the walk falls apart."
         ),
     )
+    motion_max_deg: float = Field(
+        30.0,
+        ge=0.0,
+        lt=90.0,
+        description=(
+            "Photos whose log records the camera's tracked motion (a phone's visual-inertial "
+            "odometry, `motion`; robot: person-sim): a verified pair of one tracking session "
+            "whose relative translation, as its matches give it, points more than this (deg) "
+            "away from the tracked one, plus the angle the tracking's drift allows "
+            "(sfm.motion_drift), or whose relative rotation differs from the tracked one by "
+            "more than this, is not used in mapping (a repeating texture matched one motif "
+            "along: the right rotation, the wrong translation; report.json "
+            "orientation_pairs.motion), unless the photos need it to stay joined. 0: off."
+        ),
+    )
+    motion_drift: float = Field(
+        0.03,
+        ge=0.0,
+        description=(
+            "The drift sfm.motion_max_deg allows a tracked position: this fraction of the "
+            "distance the camera was carried between two photos (standard deviation; three "
+            "of them widen the bound). Phones' visual-inertial odometry drifts 1-3% indoors."
+        ),
+    )
+    motion_map: bool = Field(
+        True,
+        description=(
+            "A person's photos whose log records the camera's tracked motion (a phone's "
+            "visual-inertial odometry, `motion`): the first map of them starts from the "
+            "tracked poses of the session most of them belong to (triangulated between "
+            "them, bundle-adjusted with a position prior at the tracked centre: "
+            "scenebot.sfm.tracked), instead of the incremental mapper's, which repeating "
+            "texture folds (the flat's walk through every room: every photo 0.8-1.3 m off "
+            "within its own room, against a median of 0.3 cm and none beyond 16 cm); the "
+            "other photos are then registered into it. false: the incremental mapper."
+        ),
+    )
+    motion_prior_std_m: float = Field(
+        0.3,
+        gt=0.0,
+        description=(
+            "sfm.motion_map: standard deviation (m) of the position prior at each photo's "
+            "tracked centre in the bundle adjustments (the tracking's drift over a walk of "
+            "a few tens of metres)."
+        ),
+    )
     place_left_out_photos: bool = Field(
         False,
         description=(

@@ -13,6 +13,7 @@ import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from scenebot.capturelog import photo_records, read_log
@@ -25,6 +26,24 @@ PHOTO_FORMATS = ("JPEG", "PNG")
 """Image formats SfM reads (PIL's names; by content, whatever the suffix)."""
 DEEP_MODES = ("I", "I;16", "I;16B", "I;16L", "I;16N", "F")
 """PIL modes of 16-bit and float images: COLMAP finds no features in them."""
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A camera pose the camera's own motion tracking recorded (a phone's visual-inertial
+    odometry: the log's ``motion``), in the frame of one tracking session.
+
+    Attributes:
+        session: the session's name; poses of two sessions are not comparable.
+        center: (3,) camera centre (m) in the session's frame.
+        rotation: (3, 3) cam_from_session rotation.
+        walked_m: length of the session's track up to this photo (m).
+    """
+
+    session: str
+    center: np.ndarray
+    rotation: np.ndarray
+    walked_m: float
 
 
 class PhotoError(ValueError):
@@ -52,6 +71,7 @@ class Photo:
             ``localization_source`` is ``this photo``, or absent).
         orientation: ``(heading, pitch, roll)`` (deg) the camera's own sensors recorded
             (a phone's compass and accelerometer: the log's ``orientation``), or ``None``.
+        motion: the camera's own tracking of its pose (:class:`Motion`), or ``None``.
         truth: the simulator's true pose record (evaluation only), or ``None``.
         source: where a person's photo was taken in from (the log's ``source``: a file of
             ``photos.folder`` or of the round's inbox), or ``None``.
@@ -70,6 +90,7 @@ class Photo:
     localization: tuple[float, float, float] | None = None
     localization_fix: bool = False
     orientation: tuple[float, float, float] | None = None
+    motion: Motion | None = field(default=None, repr=False)
     truth: dict | None = field(default=None, repr=False)
     source: str | None = None
 
@@ -171,6 +192,23 @@ def _orientation(d: dict | None) -> tuple[float, float, float] | None:
     return _three(d, ("heading_deg", "pitch_deg", "roll_deg"))
 
 
+def _motion(d: dict | None) -> Motion | None:
+    """The log's ``motion`` (``session``, ``center``, ``R_cam_from_session``, ``walked_m``),
+    or None when it is missing or malformed (a rotation that is not one)."""
+    if not isinstance(d, dict):
+        return None
+    try:
+        c = np.asarray(d["center"], float).reshape(3)
+        R = np.asarray(d["R_cam_from_session"], float).reshape(3, 3)
+        walked = float(d.get("walked_m", 0.0))
+        session = str(d["session"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (np.all(np.isfinite(c)) and np.allclose(R @ R.T, np.eye(3), atol=1e-3)):
+        return None
+    return Motion(session, c, R, walked)
+
+
 def image_root_of(capture_dirs: list[Path]) -> Path:
     """The image root of capture rounds: the scene folder that holds ``round_*/capture``.
 
@@ -222,6 +260,7 @@ def photos_from_captures(capture_dirs: list[Path]) -> tuple[Path, list[Photo]]:
                     localization_fix=_pose3(rec.get("localization")) is not None
                     and rec.get("localization_source", "this photo") == "this photo",
                     orientation=_orientation(rec.get("orientation")),
+                    motion=_motion(rec.get("motion")),
                     truth=rec.get("truth"),
                     source=rec.get("source"),
                 )

@@ -66,6 +66,7 @@ from scenebot.sfm.register import (
     map_new_photos,
     shot_poses,
 )
+from scenebot.sfm.tracked import map_from_motion, pairs_the_tracking_disowns, tracked_residuals
 
 log = logging.getLogger(__name__)
 
@@ -653,20 +654,31 @@ def _features_and_pairs(s: _Session) -> tuple[dict, dict]:
 
 
 def _drop_pairs_against_orientation(s: _Session) -> dict | None:
-    """A person's photos with the camera's orientation in their log: the verified pairs it
-    contradicts leave the database before mapping (:mod:`scenebot.sfm.orientation`);
-    report.json's ``orientation_pairs``, None when no photo has one."""
-    if not s.person or not any(p.orientation for p in s.photos):
+    """A person's photos with the camera's orientation or its tracked motion in their log:
+    the verified pairs they contradict leave the database before mapping
+    (:mod:`scenebot.sfm.orientation`); report.json's ``orientation_pairs``, None when no
+    photo has either."""
+    if not s.person or not any(p.orientation or p.motion for p in s.photos):
         return None
+    cfg = s.cfg
     stats = drop_pairs_against_orientation(
-        s.db_path, s.photos, s.cfg.orientation_max_deg, s.cfg.min_num_matches
-    )
+        s.db_path, s.photos, cfg.orientation_max_deg, cfg.min_num_matches,
+        cfg.motion_max_deg, cfg.motion_drift,
+    )  # fmt: skip
     s.timings["orientation"] = stats["seconds"]
     if stats["dropped"]:
         log.info(
             "orientation: %d of %d verified pairs of photos with the camera's orientation "
             "contradict it by more than sfm.orientation_max_deg = %g deg: not used in mapping",
-            stats["dropped"], stats["checked"], s.cfg.orientation_max_deg,
+            stats["dropped"], stats["checked"], cfg.orientation_max_deg,
+        )  # fmt: skip
+    m = stats["motion"]
+    if m["dropped"]:
+        log.info(
+            "motion: %d of %d verified pairs of photos with the camera's tracked motion point "
+            "elsewhere than it by more than sfm.motion_max_deg = %g deg (plus the drift of "
+            "sfm.motion_drift = %g per metre walked): not used in mapping",
+            m["dropped"], m["checked"], cfg.motion_max_deg, cfg.motion_drift,
         )  # fmt: skip
     return stats
 
@@ -696,12 +708,48 @@ def _map(s: _Session) -> MappingResult:
             s.db_path, s.root, s.photos, cfg, s.previous,
             None if s.person else _previous_camera_offset(s), shots=s.shots,
         )  # fmt: skip
+    if mres is None and s.previous is None:
+        mres = _map_tracked(s)
     if mres is None:
         mres = map_photos(
             s.db_path, s.root, s.names, s.work / "mapping", cfg, start, s.fix_focal,
             person_photos=s.person, held=s.previous,
         )  # fmt: skip
     s.timings["map"] = mres.seconds
+    return mres
+
+
+def _map_tracked(s: _Session) -> MappingResult | None:
+    """A person's first map from the tracked motion (``cfg.motion_map``,
+    :func:`map_from_motion`): the largest tracking session's photos placed at their tracked
+    poses, the other photos then registered into it by the incremental mapper. None when
+    off, not a person's photos, or no photo has a tracked pose."""
+    cfg = s.cfg
+    if not (s.person and cfg.motion_map):
+        return None
+    mres = map_from_motion(s.db_path, s.root, s.photos, cfg, s.fix_focal)
+    if mres is None:
+        return None
+    rec = mres.reconstruction
+    in_map = {rec.image(i).name for i in rec.reg_image_ids()}
+    session = mres.refinement["session"]
+    others = [p.name for p in s.photos if p.motion is None or p.motion.session != session]
+    if not others:
+        return mres
+    log.info("registering %d photos of other sessions into the tracked map", len(others))
+    tracked = mres
+    mres = map_photos(
+        s.db_path, s.root, s.names, s.work / "mapping", cfg, rec, s.fix_focal,
+        person_photos=True, held=rec,
+    )  # fmt: skip
+    if mres.mode != "incremental":  # registering into it failed: the tracked map alone
+        log.warning("the other sessions' photos did not register into the tracked map")
+        tracked.dropped.update({n: "did not register into the tracked map" for n in others})
+        return tracked
+    mres.seconds += tracked.seconds
+    mres.mapper = "tracked+incremental"
+    mres.refinement = mres.refinement | {"tracked": tracked.refinement,
+                                         "tracked_photos": len(in_map)}  # fmt: skip
     return mres
 
 
@@ -976,7 +1024,9 @@ def _check_person_map(
     t = time.perf_counter()
     check = _person_check(s, mres, alignment)
     runs = [_check_record("as mapped", mres, check)]
-    best, kept = (mres, alignment, check), 0
+    if not check.ok and mres.mapper.startswith("tracked") and check.contradicted:
+        check = _drop_disowned_pairs(s, mres, alignment, check, runs)
+    best, kept = (mres, alignment, check), len(runs) - 1
     if not check.ok and _only_new_photos_named(s, mres, check):
         log.warning(
             "the person's map fails its check for new photos only (the previous map passed "
@@ -1024,6 +1074,34 @@ def _check_person_map(
         "seconds": time.perf_counter() - t,
     }
     return mres, alignment, report
+
+
+def _drop_disowned_pairs(
+    s: _Session, mres: MappingResult, alignment: Alignment, check: PersonCheck, runs: list
+) -> PersonCheck:
+    """A map from the tracked motion that does not hold some verified pairs: the pairs whose
+    two photos lie where their tracking puts them (within ``sfm.motion_prior_std_m``,
+    :func:`pairs_the_tracking_disowns`) are wrong matches (a repeating texture), not photos
+    registered off: they leave the database, as the pairs the sensors contradict do, and the
+    map is checked again (``runs`` gets the line)."""
+    residuals = tracked_residuals(mres.reconstruction, s.photos)
+    wrong = pairs_the_tracking_disowns(check.contradicted, residuals, s.cfg.motion_prior_std_m)
+    if not wrong:
+        return check
+    with open_database(s.db_path) as db:
+        ids = {im.name: im.image_id for im in db.read_all_images()}
+        for a, b in wrong:
+            db.delete_two_view_geometry(ids[a], ids[b])
+    log.warning(
+        "%d of the %d verified pairs the tracked map does not hold join photos that lie where "
+        "their tracking puts them (within sfm.motion_prior_std_m = %g m): wrong matches, not "
+        "used: %s", len(wrong), len(check.contradicted), s.cfg.motion_prior_std_m,
+        ", ".join(f"{a.rsplit('/', 1)[-1]}-{b.rsplit('/', 1)[-1]}" for a, b in wrong[:8]),
+    )  # fmt: skip
+    check = _person_check(s, mres, alignment)
+    runs.append(_check_record("the pairs the tracking disowns dropped", mres, check)
+                | {"pairs_dropped": len(wrong)})  # fmt: skip
+    return check
 
 
 def _check_record(how: str, mres: MappingResult, check: PersonCheck) -> dict:
