@@ -54,6 +54,10 @@ SETTLED_M = 0.005
 """The poses have settled when no camera centre moved more than this (m) in a round."""
 ADJUSTMENTS = 3
 """Bundle adjustments per round, each after dropping the observations beyond the bound."""
+FIRST_MAX_ANGLE_DEG = 8.0
+"""The first triangulation's bound (deg) on the angle between a track's rays (COLMAP's: 2):
+rays from tracked poses a drift off. The observations' bound then starts at three times
+their median reprojection error and halves every round down to the mapper's own."""
 
 
 def tracked_session(photos: list[Photo]) -> tuple[str, list[Photo]] | None:
@@ -116,31 +120,40 @@ def map_from_motion(
     if len(centres) < 3:
         mapper.end_reconstruction(True)
         return None
-    tri = opts.get_triangulation()
     delete = mapper.observation_manager.delete_observation
     ba = _ba_options(cfg.num_threads, not fix_focal, False, cauchy_px=1.0)
     prior_opts = pycolmap.PosePriorBundleAdjustmentOptions()
     prior_opts.prior_position_fallback_stddev = cfg.motion_prior_std_m
     ids = sorted(centres)
-    moved, rounds = float("inf"), 0
-    while rounds < MAX_ROUNDS and moved > SETTLED_M:
+    moved, rounds, bound = float("inf"), 0, None
+    while rounds < MAX_ROUNDS and (moved > SETTLED_M or bound > max_error):
         before = np.array([rec.image(i).projection_center() for i in ids])
+        tri = opts.get_triangulation()
+        if bound is None:  # the tracked poses' error: tracks from farther apart rays
+            tri.create_max_angle_error = FIRST_MAX_ANGLE_DEG
+            tri.continue_max_angle_error = FIRST_MAX_ANGLE_DEG
         for iid in ids:
             mapper.triangulate_image(tri, iid)
+        if bound is None:
+            errors = ObservationTable(rec).errors(rec)
+            errors = errors[np.isfinite(errors)]
+            bound = max(max_error, 3.0 * float(np.median(errors))) if len(errors) else max_error
+        else:
+            bound = max(max_error, bound / 2.0)
         for _ in range(ADJUSTMENTS):
-            ObservationTable(rec).delete_beyond(rec, max_error, delete)
+            ObservationTable(rec).delete_beyond(rec, bound, delete)
             config = pycolmap.BundleAdjustmentConfig()
             for iid in ids:
                 config.add_image(iid)
             priors = position_priors(rec, {i: centres[i] for i in ids}, cfg.motion_prior_std_m)
             pycolmap.create_pose_prior_bundle_adjuster(ba, prior_opts, config, priors, rec).solve()
-        ObservationTable(rec).delete_beyond(rec, max_error, delete)
+        ObservationTable(rec).delete_beyond(rec, bound, delete)
         after = np.array([rec.image(i).projection_center() for i in ids])
         moved = float(np.max(np.linalg.norm(after - before, axis=1)))
         rounds += 1
-        mapper.complete_and_merge_tracks(tri)
-        log.info("tracked map, round %d: %d points, poses moved up to %.3f m", rounds,
-                 rec.num_points3D(), moved)  # fmt: skip
+        mapper.complete_and_merge_tracks(opts.get_triangulation())
+        log.info("tracked map, round %d: %d points within %.1f px, poses moved up to %.3f m",
+                 rounds, rec.num_points3D(), bound, moved)  # fmt: skip
     dropped: dict[str, str] = {}
     for iid in ids:
         im = rec.image(iid)
@@ -167,7 +180,7 @@ def map_from_motion(
         "session": session,
         "rounds": rounds,
         "moved_m": moved,
-        "max_error_px": max_error,
+        "max_error_px": bound,
         "prior_std_m": cfg.motion_prior_std_m,
     }
     log.info(

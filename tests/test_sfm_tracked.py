@@ -1,0 +1,125 @@
+"""A person's photos mapped from the camera's tracked motion (scenebot.sfm.tracked), on a
+pycolmap synthetic dataset: every pair matched and verified, the true poses known."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+
+from scenebot.geometry import similarity_fit
+from scenebot.sfm.config import SfmConfig
+from scenebot.sfm.photos import Motion, Photo
+from scenebot.sfm.tracked import (
+    map_from_motion,
+    pairs_the_tracking_disowns,
+    tracked_residuals,
+    tracked_session,
+)
+from tests.fixtures.synthetic import synthetic_database
+
+
+@pytest.fixture()
+def dataset(tmp_path):
+    """Twelve photos of 600 points, every pair matched and verified."""
+    rec, db_path = synthetic_database(tmp_path, 12, 600)
+    return db_path, rec
+
+
+def tracked_photos(rec, drift_m: float, seed: int = 0, session=lambda k: "round_000"):
+    """Each photo with its true pose in a session frame (turned 30 deg, shifted) plus a
+    random error of ``drift_m`` per axis in its centre (the tracking's drift)."""
+    rng = np.random.default_rng(seed)
+    c, s = math.cos(0.5), math.sin(0.5)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    photos, walked, last = [], 0.0, None
+    for k, iid in enumerate(sorted(rec.reg_image_ids())):
+        im = rec.image(iid)
+        centre = im.projection_center()
+        walked += 0.0 if last is None else float(np.linalg.norm(centre - last))
+        last = centre
+        tracked = turn @ centre + [2.0, 1.0, 0.0] + rng.normal(0, drift_m, 3)
+        R = im.cam_from_world().rotation.matrix() @ turn.T
+        motion = Motion(session(k), tracked, R, walked)
+        photos.append(Photo(im.name, Path(im.name), motion=motion))
+    return photos
+
+
+def centre_errors(model, truth) -> np.ndarray:
+    """Camera centre errors of ``model`` after a similarity fit to ``truth`` (true units)."""
+    names = {truth.image(i).name: truth.image(i).projection_center() for i in truth.reg_image_ids()}
+    ids = list(model.reg_image_ids())
+    est = np.array([model.image(i).projection_center() for i in ids])
+    true = np.array([names[model.image(i).name] for i in ids])
+    s, R, t = similarity_fit(est, true)
+    return np.linalg.norm(s * est @ R.T + t - true, axis=1)
+
+
+def test_photos_placed_at_their_tracked_poses_settle_where_they_were(dataset, tmp_path):
+    """Tracked centres 5 cm off at random: every photo registers, the matches pull each
+    back to within a centimetre of its true place, every point triangulated."""
+    db_path, truth = dataset
+    spread = float(np.median(np.ptp([truth.image(i).projection_center()
+                                      for i in truth.reg_image_ids()], axis=0)))  # fmt: skip
+    photos = tracked_photos(truth, 0.05 * spread / 3.0)
+    cfg = SfmConfig(motion_prior_std_m=0.3 * spread / 3.0, num_threads=1)
+    res = map_from_motion(db_path, tmp_path, photos, cfg, fix_focal=True)
+    assert res is not None and res.mode == "tracked" and res.mapper == "tracked"
+    assert res.reconstruction.num_reg_images() == 12 and not res.dropped
+    assert res.refinement["session"] == "round_000" and res.refinement["rounds"] >= 1
+    before = centre_errors_of_tracking(photos, truth)
+    after = centre_errors(res.reconstruction, truth)
+    assert np.median(before) > 5 * np.median(after)
+    assert np.max(after) < 0.01 * spread
+    assert res.reconstruction.num_points3D() > 500
+    assert res.reconstruction.compute_mean_reprojection_error() < 1.0
+
+
+def centre_errors_of_tracking(photos, truth) -> np.ndarray:
+    names = {truth.image(i).name: truth.image(i).projection_center() for i in truth.reg_image_ids()}
+    est = np.array([p.motion.center for p in photos])
+    true = np.array([names[p.name] for p in photos])
+    s, R, t = similarity_fit(est, true)
+    return np.linalg.norm(s * est @ R.T + t - true, axis=1)
+
+
+def test_the_largest_session_is_mapped_and_the_others_named(dataset, tmp_path):
+    """Photos of another session (another round) or without tracking are not placed; with
+    fewer than three tracked photos in a session there is no tracked map."""
+    db_path, truth = dataset
+    photos = tracked_photos(truth, 0.0, session=lambda k: "round_001" if k >= 9 else "round_000")
+    photos[0] = Photo(photos[0].name, photos[0].path)  # no tracking
+    assert tracked_session(photos)[0] == "round_000"
+    res = map_from_motion(db_path, tmp_path, photos, SfmConfig(num_threads=1), fix_focal=True)
+    assert res.reconstruction.num_reg_images() == 8
+    assert set(res.dropped) == {photos[k].name for k in (0, 9, 10, 11)}
+    assert "round_000" in res.dropped[photos[9].name]
+    few = tracked_photos(truth, 0.0, session=lambda k: f"s{k % 6}")
+    assert tracked_session(few) is None
+    assert map_from_motion(db_path, tmp_path, few, SfmConfig(), fix_focal=True) is None
+    assert map_from_motion(db_path, tmp_path, [Photo(p.name, p.path) for p in photos],
+                           SfmConfig(), fix_focal=True) is None  # fmt: skip
+
+
+def test_a_pair_is_disowned_only_between_photos_where_their_tracking_puts_them(dataset):
+    """The residuals of a map against the tracking: a photo moved in the map stands out;
+    a contradicted pair of two photos in place is a wrong pair, one with the moved photo
+    is not."""
+    _, truth = dataset
+    photos = tracked_photos(truth, 0.0)
+    model = pycolmap.Reconstruction(truth)
+    ids = sorted(model.reg_image_ids())
+    moved = model.image(ids[3])
+    pose = moved.cam_from_world()
+    model.frame(moved.frame_id).rig_from_world = pycolmap.Rigid3d(
+        pose.rotation, np.asarray(pose.translation) + np.array([1.0, 0.0, 0.0])
+    )
+    res = tracked_residuals(model, photos)
+    assert len(res) == 12 and res[moved.name] > 0.9
+    assert max(v for k, v in res.items() if k != moved.name) < 1e-6
+    a, b = model.image(ids[0]).name, model.image(ids[1]).name
+    pairs = [(a, b, 50, 0.0), (a, moved.name, 40, 0.1)]
+    assert pairs_the_tracking_disowns(pairs, res, 0.3) == [(a, b)]
