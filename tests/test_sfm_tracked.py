@@ -123,3 +123,24 @@ def test_a_pair_is_disowned_only_between_photos_where_their_tracking_puts_them(d
     a, b = model.image(ids[0]).name, model.image(ids[1]).name
     pairs = [(a, b, 50, 0.0), (a, moved.name, 40, 0.1)]
     assert pairs_the_tracking_disowns(pairs, res, 0.3) == [(a, b)]
+
+
+def test_a_person_map_failing_its_check_is_mapped_again_from_the_tracking_first(dataset):
+    """The person check's other maps: from the tracked motion first, when photos have it
+    and the failing map was not that one; then global SfM and the incremental seeds."""
+    from types import SimpleNamespace
+
+    from scenebot.sfm.stage import _person_remaps
+
+    _, truth = dataset
+    check = SimpleNamespace(stats={"pairs": {"turned_in_place_photos": 0}})
+
+    def ways(photos, mapper, **cfg):
+        s = SimpleNamespace(cfg=SfmConfig(**cfg), photos=photos)
+        return [how for how, _ in _person_remaps(s, check, 12, mapper)]
+
+    tracked = tracked_photos(truth, 0.0)
+    assert ways(tracked, "incremental")[:2] == ["from the tracked motion", "global SfM"]
+    assert ways(tracked, "tracked")[0] == "global SfM"
+    assert ways(tracked, "incremental", motion_map=False)[0] == "global SfM"
+    assert ways([Photo(p.name, p.path) for p in tracked], "incremental")[0] == "global SfM"

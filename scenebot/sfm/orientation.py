@@ -1,4 +1,12 @@
-"""Pairs of photos their cameras' own orientation contradicts: left out of mapping.
+"""Pairs of photos their cameras' own sensors contradict: left out of mapping.
+
+Two sensors: the orientation (below) and the tracked motion (a phone's visual-inertial
+odometry, :class:`~scenebot.sfm.photos.Motion`), whose relative pose of two photos of one
+session gives the pair's translation direction too: a wallpaper matched one motif along the
+same wall gives the right rotation and a translation pointing elsewhere. Judged with the
+simulator's truth (tracking drifting 1% of the distance walked, the check allowing 3%): the
+flat's 178-photo walk, 397 of its 629 wrong pairs dropped and none of its 1,738 right ones;
+the office's 200-photo walk, 2,526 of 3,739 and none right.
 
 A phone records its orientation with each photo: the compass heading (good to 5-15 degrees
 indoors) and, from the accelerometer, the pitch and roll (good to a degree). Two photos'

@@ -66,7 +66,12 @@ from scenebot.sfm.register import (
     map_new_photos,
     shot_poses,
 )
-from scenebot.sfm.tracked import map_from_motion, pairs_the_tracking_disowns, tracked_residuals
+from scenebot.sfm.tracked import (
+    map_from_motion,
+    pairs_the_tracking_disowns,
+    tracked_residuals,
+    tracked_session,
+)
 
 log = logging.getLogger(__name__)
 
@@ -949,13 +954,17 @@ def _unplaced(s: _Session, mres: MappingResult, check: PersonCheck) -> tuple[boo
     return not check.ok, check.whole, named, len(check.contradicted)
 
 
-def _person_remaps(s: _Session, check: PersonCheck, registered: int):
-    """The other ways to map a person's photos, in order: global SfM (not when at least
+def _person_remaps(s: _Session, check: PersonCheck, registered: int, mapper: str):
+    """The other ways to map a person's photos (``mapper``: the first map's), in order: from
+    the tracked motion (:func:`_map_tracked`, when some photos have it and the first map
+    was not that), global SfM (not when at least
     :data:`TURNED_SHARE_NO_GLOBAL` of the ``registered`` photos turned in place, as ``check``
     of the first map finds them: ``map`` is then None), then incremental mapping from
     scratch with ``cfg.person_remap_attempts`` other seeds (without global SfM's fallback when
     it is not tried itself). Yields ``(how, map)`` with ``map()`` the mapping result."""
     cfg = s.cfg
+    if cfg.motion_map and not mapper.startswith("tracked") and tracked_session(s.photos):
+        yield "from the tracked motion", lambda: _map_tracked(s)
     turned = check.stats["pairs"].get("turned_in_place_photos", 0)
     no_global = turned >= TURNED_SHARE_NO_GLOBAL * registered
     if no_global:
@@ -1037,13 +1046,15 @@ def _check_person_map(
     elif not check.ok:
         log.warning("the person's map fails its check: %s", "; ".join(check.problems))
         registered = mres.reconstruction.num_reg_images()
-        for how, remap in _person_remaps(s, check, registered):
+        for how, remap in _person_remaps(s, check, registered, mres.mapper):
             if remap is None:
                 runs.append({"mapping": how, "skipped": "photos turned in place"})
                 continue
             log.warning("mapping the person's photos again: %s", how)
             try:
                 m2 = remap()
+                if m2 is None:
+                    raise SfmError("no tracking session of three photos with features")
                 a2 = _person_alignment(s, m2)
             except (SfmError, ValueError) as exc:
                 log.warning("%s failed: %s", how, exc)
