@@ -1033,7 +1033,7 @@ def _check_person_map(
     t = time.perf_counter()
     check = _person_check(s, mres, alignment)
     runs = [_check_record("as mapped", mres, check)]
-    if not check.ok and mres.mapper.startswith("tracked") and check.contradicted:
+    if not check.ok and check.contradicted and cfg.motion_map and tracked_session(s.photos):
         check = _drop_disowned_pairs(s, mres, alignment, check, runs)
     best, kept = (mres, alignment, check), len(runs) - 1
     if not check.ok and _only_new_photos_named(s, mres, check):
@@ -1090,8 +1090,8 @@ def _check_person_map(
 def _drop_disowned_pairs(
     s: _Session, mres: MappingResult, alignment: Alignment, check: PersonCheck, runs: list
 ) -> PersonCheck:
-    """A map from the tracked motion that does not hold some verified pairs: the pairs whose
-    two photos lie where their tracking puts them (within ``sfm.motion_prior_std_m``,
+    """A map of photos with a tracked motion that does not hold some verified pairs: the
+    pairs whose two photos lie where their tracking puts them (within ``sfm.motion_prior_std_m``,
     :func:`pairs_the_tracking_disowns`) are wrong matches (a repeating texture), not photos
     registered off: they leave the database, as the pairs the sensors contradict do, and the
     map is checked again (``runs`` gets the line)."""
@@ -1104,7 +1104,7 @@ def _drop_disowned_pairs(
         for a, b in wrong:
             db.delete_two_view_geometry(ids[a], ids[b])
     log.warning(
-        "%d of the %d verified pairs the tracked map does not hold join photos that lie where "
+        "%d of the %d verified pairs the map does not hold join photos that lie where "
         "their tracking puts them (within sfm.motion_prior_std_m = %g m): wrong matches, not "
         "used: %s", len(wrong), len(check.contradicted), s.cfg.motion_prior_std_m,
         ", ".join(f"{a.rsplit('/', 1)[-1]}-{b.rsplit('/', 1)[-1]}" for a, b in wrong[:8]),
