@@ -13,7 +13,7 @@ import pytest
 
 from scenebot.sfm.orientation import drop_pairs_against_orientation, rotation_from_orientation
 from scenebot.sfm.photos import Photo
-from tests.fixtures.synthetic import synthetic_database
+from tests.fixtures.synthetic import synthetic_database, tracked_photos
 
 
 def orientation_of(R: np.ndarray) -> tuple[float, float, float]:
@@ -107,39 +107,20 @@ def test_a_pair_is_dropped_only_where_the_photos_stay_joined():
     assert contradicted(judged, 200.0) == []
 
 
-def _motion(rec, moved: dict[int, np.ndarray] | None = None, session=lambda k: "round_000"):
-    """Each photo's tracked pose: the true one in a session frame turned 40 deg and shifted,
-    the track's length walked in photo order; ``moved``: photo index -> a tracked centre
-    displaced by that (a wrong track)."""
-    from scenebot.sfm.photos import Motion
-
-    c, s = math.cos(0.7), math.sin(0.7)
-    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    photos, walked, last = [], 0.0, None
-    for k, iid in enumerate(sorted(rec.reg_image_ids())):
-        im = rec.image(iid)
-        centre = im.projection_center()
-        walked += 0.0 if last is None else float(np.linalg.norm(centre - last))
-        last = centre
-        tracked = turn @ centre + [3.0, -1.0, 0.5] + (moved or {}).get(k, 0.0)
-        R = im.cam_from_world().rotation.matrix() @ turn.T
-        photos.append(Photo(im.name, Path(im.name), motion=Motion(session(k), tracked, R, walked)))
-    return photos
-
-
 def test_pairs_whose_translation_the_tracked_motion_contradicts_leave_the_map(dataset):
     """The true tracked motion keeps every pair; a photo whose tracked centre lies far from
     where it was (a wallpaper matched one motif along: the right rotation, the wrong
     translation) loses its pairs but the one that keeps it joined; the orientation check
     off, the rotation right: only the translation can tell."""
     db_path, rec = dataset
-    right = drop_pairs_against_orientation(db_path, _motion(rec), 0.0, 15, 30.0, 0.0)
+    right = drop_pairs_against_orientation(db_path, tracked_photos(rec), 0.0, 15, 30.0, 0.0)
     m = right["motion"]
     assert m["photos"] == 10 and m["checked"] == 45 and m["dropped"] == 0
     assert m["angle_deg"]["p90"] < 1.0 and _verified(db_path) == 45
     spread = np.ptp([rec.image(i).projection_center() for i in rec.reg_image_ids()], axis=0)
     moved = {4: 3.0 * spread * [1.0, -1.0, 0.0]}
-    wrong = drop_pairs_against_orientation(db_path, _motion(rec, moved), 0.0, 15, 30.0, 0.0)
+    wrong_track = tracked_photos(rec, moved=moved)
+    wrong = drop_pairs_against_orientation(db_path, wrong_track, 0.0, 15, 30.0, 0.0)
     assert wrong["motion"]["dropped"] >= 6 and wrong["dropped"] == 0
     assert _verified(db_path) == 45 - wrong["motion"]["dropped"]
     db = pycolmap.Database.open(str(db_path))
@@ -164,13 +145,13 @@ def test_the_motion_judges_only_pairs_of_one_session_it_can_tell_apart(dataset):
     db_path, rec = dataset
     spread = np.ptp([rec.image(i).projection_center() for i in rec.reg_image_ids()], axis=0)
     moved = {4: 3.0 * spread * [1.0, -1.0, 0.0]}
-    assert (
-        drop_pairs_against_orientation(db_path, _motion(rec, moved), 0.0, 15, 0.0, 0.0)["motion"][
-            "dropped"
-        ]
-        == 0
-    )
-    alone = _motion(rec, moved, session=lambda k: "round_001" if k == 4 else "round_000")
+    off = drop_pairs_against_orientation(db_path, tracked_photos(rec, moved=moved), 0, 15, 0, 0)
+    assert off["motion"]["dropped"] == 0
+
+    def session(k):
+        return "round_001" if k == 4 else "round_000"
+
+    alone = tracked_photos(rec, moved=moved, session=session)
     stats = drop_pairs_against_orientation(db_path, alone, 0.0, 15, 30.0, 0.0)
     assert stats["motion"]["checked"] == 36 and stats["motion"]["dropped"] == 0
     a = Motion("s", np.zeros(3), np.eye(3), 0.0)

@@ -3,23 +3,20 @@ pycolmap synthetic dataset: every pair matched and verified, the true poses know
 
 from __future__ import annotations
 
-import math
-from pathlib import Path
-
 import numpy as np
 import pycolmap
 import pytest
 
 from scenebot.geometry import similarity_fit
 from scenebot.sfm.config import SfmConfig
-from scenebot.sfm.photos import Motion, Photo
+from scenebot.sfm.photos import Photo
 from scenebot.sfm.tracked import (
     map_from_motion,
     pairs_the_tracking_disowns,
     tracked_residuals,
     tracked_session,
 )
-from tests.fixtures.synthetic import synthetic_database
+from tests.fixtures.synthetic import synthetic_database, tracked_photos
 
 
 @pytest.fixture()
@@ -27,25 +24,6 @@ def dataset(tmp_path):
     """Twelve photos of 600 points, every pair matched and verified."""
     rec, db_path = synthetic_database(tmp_path, 12, 600)
     return db_path, rec
-
-
-def tracked_photos(rec, drift_m: float, seed: int = 0, session=lambda k: "round_000"):
-    """Each photo with its true pose in a session frame (turned 30 deg, shifted) plus a
-    random error of ``drift_m`` per axis in its centre (the tracking's drift)."""
-    rng = np.random.default_rng(seed)
-    c, s = math.cos(0.5), math.sin(0.5)
-    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    photos, walked, last = [], 0.0, None
-    for k, iid in enumerate(sorted(rec.reg_image_ids())):
-        im = rec.image(iid)
-        centre = im.projection_center()
-        walked += 0.0 if last is None else float(np.linalg.norm(centre - last))
-        last = centre
-        tracked = turn @ centre + [2.0, 1.0, 0.0] + rng.normal(0, drift_m, 3)
-        R = im.cam_from_world().rotation.matrix() @ turn.T
-        motion = Motion(session(k), tracked, R, walked)
-        photos.append(Photo(im.name, Path(im.name), motion=motion))
-    return photos
 
 
 def centre_errors(model, truth) -> np.ndarray:

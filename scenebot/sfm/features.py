@@ -28,6 +28,16 @@ def open_database(path: Path) -> pycolmap.Database:
     return pycolmap.Database.open(str(path))
 
 
+def database_cache(db_path: Path, names, min_num_matches: int) -> pycolmap.DatabaseCache:
+    """The database's photos of ``names`` and their verified pairs of at least
+    ``min_num_matches`` inliers, loaded for an incremental mapper."""
+    with open_database(db_path) as db:
+        opts = pycolmap.DatabaseCacheOptions()
+        opts.min_num_matches = min_num_matches
+        opts.image_names = set(names)
+        return pycolmap.DatabaseCache.create(db, opts)
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 

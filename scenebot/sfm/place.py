@@ -25,7 +25,7 @@ import pycolmap
 
 from scenebot.geometry import map_mount
 from scenebot.sfm.config import SfmConfig
-from scenebot.sfm.features import open_database
+from scenebot.sfm.features import database_cache
 from scenebot.sfm.mapping import (
     ObservationTable,
     _ba_options,
@@ -87,11 +87,7 @@ def place_left_out_photos(
     height, pitch = map_mount(rec)
     priors = camera_priors(todo, camera_offset_m, cfg.camera_yaw_deg, height, pitch)
     names = [p.name for p in photos]
-    with open_database(db_path) as db:
-        cache_opts = pycolmap.DatabaseCacheOptions()
-        cache_opts.min_num_matches = cfg.min_num_matches
-        cache_opts.image_names = set(names)
-        cache = pycolmap.DatabaseCache.create(db, cache_opts)
+    cache = database_cache(db_path, set(names), cfg.min_num_matches)
     opts = mapping_options(cfg, names, continuing=True, fix_focal=True)
     mapper = pycolmap.IncrementalMapper(cache)
     mapper.begin_reconstruction(rec)

@@ -42,7 +42,7 @@ import pycolmap
 
 from scenebot.geometry import look_rotation, map_mount
 from scenebot.sfm.config import SfmConfig
-from scenebot.sfm.features import open_database
+from scenebot.sfm.features import database_cache
 from scenebot.sfm.mapping import (
     MappingResult,
     ObservationTable,
@@ -227,11 +227,7 @@ def register_new_photos(
         if rec.image(iid).name not in keep:
             rec.deregister_frame(rec.image(iid).frame_id)
     previous_ids = set(rec.reg_image_ids())
-    with open_database(db_path) as db:
-        cache_opts = pycolmap.DatabaseCacheOptions()
-        cache_opts.min_num_matches = cfg.min_num_matches
-        cache_opts.image_names = keep
-        cache = pycolmap.DatabaseCache.create(db, cache_opts)
+    cache = database_cache(db_path, keep, cfg.min_num_matches)
     opts = mapping_options(cfg, names, continuing=True, fix_focal=True)
     mopts = opts.get_mapper()
     mopts.fix_existing_frames = True

@@ -36,7 +36,7 @@ import pycolmap
 
 from scenebot.geometry import similarity_fit
 from scenebot.sfm.config import SfmConfig
-from scenebot.sfm.features import open_database
+from scenebot.sfm.features import database_cache
 from scenebot.sfm.mapping import (
     MappingResult,
     ObservationTable,
@@ -96,11 +96,7 @@ def map_from_motion(
         return None
     session, members = found
     names = [p.name for p in members]
-    with open_database(db_path) as db:
-        cache_opts = pycolmap.DatabaseCacheOptions()
-        cache_opts.min_num_matches = cfg.min_num_matches
-        cache_opts.image_names = set(names)
-        cache = pycolmap.DatabaseCache.create(db, cache_opts)
+    cache = database_cache(db_path, set(names), cfg.min_num_matches)
     rec = pycolmap.Reconstruction()
     mapper = pycolmap.IncrementalMapper(cache)
     mapper.begin_reconstruction(rec)
