@@ -384,3 +384,36 @@ def test_a_tape_between_photos_not_in_the_map_leaves_the_scale_unknown(tmp_path,
     c0, c1 = (rec.image(ids[k]).projection_center() for k in (0, 1))
     assert metric.scale == pytest.approx(2.0 / np.linalg.norm(c1 - c0), rel=1e-6)
     assert unknown.scale != pytest.approx(metric.scale)
+
+
+def test_a_capture_apps_record_beside_the_photos_goes_into_the_log(scene, tmp_path):
+    """phone.jsonl beside the photos (photos.folder or an inbox): each photo's orientation and
+    tracked motion go into its log record, other fields and other files' lines are ignored; a
+    broken line stops the round naming the file and the line."""
+    _, inbox, _ = scene
+    jpeg(inbox / "IMG_1.jpg", 1)
+    motion = {"session": "s1", "center": [0.1, 0.2, 1.5], "R_cam_from_session": np.eye(3).tolist(),
+              "walked_m": 3.2}  # fmt: skip
+    orientation = {"heading_deg": 90.0, "pitch_deg": 5.0, "roll_deg": 0.0}
+    (inbox / "phone.jsonl").write_text(
+        json.dumps({"image": "IMG_1.jpg", "motion": motion, "orientation": orientation,
+                    "exposure": 0.01}) + "\n\n"
+        + json.dumps({"image": "IMG_9.jpg", "motion": motion}) + "\n"
+    )  # fmt: skip
+    run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    (rec,) = photo_records(inbox.parent / "log.jsonl")
+    assert rec["motion"] == motion and rec["orientation"] == orientation
+    assert "exposure" not in rec
+    c = cfg(tmp_path)
+    jpeg(c.photos.folder / "DSC0.jpg", 3)
+    (c.photos.folder / "phone.jsonl").write_text(json.dumps({"image": "DSC0.jpg",
+                                                             "motion": motion}) + "\n")  # fmt: skip
+    cap = tmp_path / "results" / "office" / "round_000" / "capture"
+    run_folder_round(c, cap)
+    assert photo_records(cap / "log.jsonl")[0]["motion"] == motion
+    (inbox / "phone.jsonl").write_text('{"image": "IMG_1.jpg"}\n{"motion": {}}\n')
+    with pytest.raises(InboxError, match=r"phone\.jsonl, line 2: no \"image\""):
+        run_inbox_round(cfg(tmp_path), inbox.parent, 1)
+    (inbox / "phone.jsonl").write_text("IMG_1.jpg 0 0 0\n")
+    with pytest.raises(InboxError, match=r"phone\.jsonl, line 1: not JSON"):
+        run_inbox_round(cfg(tmp_path), inbox.parent, 1)

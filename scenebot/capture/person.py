@@ -51,6 +51,16 @@ PERSON_SIM_LOG = "person-sim.jsonl"
 """The simulated person's record of its shots, beside its photos in the inbox."""
 
 
+PHONE_LOG = "phone.jsonl"
+"""A capture app's record of each photo, beside the photos (``photos.folder`` or a round's
+inbox): one JSON object per line, the photo's file name (``image``) and what the phone knew
+when it took it: ``orientation`` (``heading_deg``, ``pitch_deg``, ``roll_deg``: compass and
+accelerometer) and ``motion`` (its tracked pose: ``session``, ``center``,
+``R_cam_from_session``, ``walked_m``; see :class:`scenebot.sfm.photos.Motion`). Other fields
+are ignored."""
+PHONE_FIELDS = ("orientation", "motion")
+
+
 class InboxError(RuntimeError):
     """The round's inbox holds no photo that can be used (the message says where to put
     photos, and names every photo left out)."""
@@ -64,6 +74,37 @@ def _read_skipped(inbox: Path) -> dict[int, str]:
         return read_skipped(inbox)
     except ValueError as exc:
         raise InboxError(str(exc)) from exc
+
+
+def phone_records(folder: Path, files: list[Path]) -> dict[str, dict]:
+    """The fields of :data:`PHONE_LOG` in ``folder`` per photo file name (``files``: the
+    folder's photos; a record of another file is logged and ignored); empty without one.
+
+    Raises:
+        InboxError: a line that is not a JSON object with an ``image`` (names the file and
+            the line).
+    """
+    path = Path(folder) / PHONE_LOG
+    if not path.is_file():
+        return {}
+    names = {f.name for f in files}
+    out: dict[str, dict] = {}
+    for k, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise InboxError(f"{path}, line {k}: not JSON ({exc.msg}); one object per line, "
+                             'e.g. {"image": "IMG_1.jpg", "motion": {...}}') from None  # fmt: skip
+        if not isinstance(rec, dict) or not isinstance(rec.get("image"), str):
+            raise InboxError(f'{path}, line {k}: no "image" (the photo\'s file name) in it')
+        name = Path(rec["image"]).name
+        if name not in names:
+            log.warning("%s, line %d: no photo %s beside it: ignored", path, k, name)
+            continue
+        out[name] = {f: rec[f] for f in PHONE_FIELDS if f in rec}
+    return out
 
 
 def photo_problem(path: Path) -> str | None:
@@ -235,7 +276,7 @@ def run_folder_round(cfg: Config, capture_dir: Path) -> dict:
             f"photos.folder {folder} holds no photo (.jpg, .jpeg or .png): put the round-0 "
             "photos there, or point photos.folder at them"
         )
-    return _take_in(cfg, Path(capture_dir), 0, files, folder)
+    return _take_in(cfg, Path(capture_dir), 0, files, folder, phone_records(folder, files))
 
 
 def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
@@ -256,7 +297,7 @@ def run_inbox_round(cfg: Config, capture_dir: Path, round_index: int) -> dict:
         return _skipped_round(cfg, capture_dir, round_index, inbox, skipped)
     if not files:
         raise InboxError(_no_photos(inbox, round_index, [], guide))
-    extra = {}
+    extra = phone_records(inbox, files)
     sim_log = inbox / PERSON_SIM_LOG
     if sim_log.is_file():
         for rec in read_log(sim_log):
