@@ -121,6 +121,7 @@ def map_from_motion(
     prior_opts = pycolmap.PosePriorBundleAdjustmentOptions()
     prior_opts.prior_position_fallback_stddev = cfg.motion_prior_std_m
     ids = sorted(centres)
+    placed = {rec.image(i).name for i in ids}
     moved, rounds, bound = float("inf"), 0, None
     while rounds < MAX_ROUNDS and (moved > SETTLED_M or bound > max_error):
         before = np.array([rec.image(i).projection_center() for i in ids])
@@ -163,9 +164,8 @@ def map_from_motion(
     rec.update_point_3d_errors()
     for iid in rec.reg_image_ids():
         rec.extract_colors_for_image(iid, str(image_root))
-    in_db = {rec.image(i).name for i in rec.images}
     for name in names:
-        if name not in in_db:
+        if name not in placed:
             dropped[name] = "no verified pair with another photo of its tracking session"
     for p in photos:
         if p.name not in tracked:
