@@ -52,7 +52,7 @@ def run(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs, person: bool 
     V, F = build_mesh(smap.xyz, smap.view_dir, smap.track_len, cfg, where, smap.centres)
     write_mesh(outputs.mesh_ply, V, F)
     if person:
-        return _person(cfg, inputs, outputs, V, where)
+        return _person(cfg, inputs, outputs, V, F, where)
     cam_xy = smap.centres[:, :2]
     rays = observation_rays(inputs.sfm_dir, cfg.min_track_length) if cfg.seen_free_space else None
     fs = compute_freespace(
@@ -72,11 +72,11 @@ def run(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs, person: bool 
     }
 
 
-def _person(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs, V, where: str) -> dict:
+def _person(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs, V, F, where: str) -> dict:
     """The free space of a person's photos: 3-D, with its layer at camera height."""
     from scenebot.mesh.volume import person_freespace
 
-    vol, plane = person_freespace(inputs.sfm_dir, V, cfg, where)
+    vol, plane, stopped = person_freespace(inputs.sfm_dir, V, F, cfg, where)
     plane.save(outputs.freespace_json, outputs.freespace_npz, where, volume=vol)
     if outputs.freespace_png is not None:
         from scenebot.geometry import read_map_geometry
@@ -91,4 +91,5 @@ def _person(cfg: MeshConfig, inputs: MeshInputs, outputs: MeshOutputs, V, where:
         "voxel_m": vol.voxel,
         "free_area_m2": plane.area_m2,
         "closed": plane.closed,
+        "lines_stopped_by_the_mesh": stopped,
     }

@@ -8,9 +8,11 @@ facade has no surface at the camera plane to cut, or one that cuts off every cam
 1. a voxel grid (``mesh.volume.voxel_m``, grown to keep ``mesh.volume.max_voxels``) over the
    map's cameras and its 3D points (those the mesh uses);
 2. the lines of sight: for every observation of a 3D point, the segment from the observing
-   camera's centre to the point; a voxel that at least ``mesh.volume.min_rays`` of them cross
-   was seen through, and is empty; a closing over one voxel fills the gaps between
-   neighbouring lines;
+   camera's centre to the point, ending where it first meets the Poisson mesh (a camera does
+   not see through a wall: a point behind one is a wrong match, a motif of a repeating
+   texture triangulated at the wrong depth, and the space behind the wall is not seen
+   through); a voxel that at least ``mesh.volume.min_rays`` of them cross was seen through,
+   and is empty; a closing over one voxel fills the gaps between neighbouring lines;
 3. voxels whose centre lies within ``mesh.volume.clearance_m`` of a 3D point or a mesh vertex
    are not free (the surface itself, and the hand's room in front of it);
 4. the free space is the connected free regions holding a camera (or next to one: a camera
@@ -86,6 +88,45 @@ def lines_of_sight(
             continue
         segs.extend((centres[i], p) for i in ids)
     return np.asarray(segs, np.float64).reshape(-1, 2, 3), cams
+
+
+def stop_at_surface(
+    segs: np.ndarray, verts: np.ndarray, faces: np.ndarray, skip_m: float
+) -> tuple[np.ndarray, int]:
+    """The lines of sight ending where they first meet the mesh: a camera does not see through
+    a surface. The mesh within ``skip_m`` (m) of the camera is passed through (a membrane the
+    Poisson reconstruction left next to a camera would otherwise stop all of its lines).
+
+    Args:
+        segs: (M, 2, 3) segments [camera centre, point] (m).
+        verts: (V, 3) mesh vertices (m).
+        faces: (F, 3) triangles.
+        skip_m: the mesh this close to the camera does not stop a line (m).
+
+    Returns:
+        The segments, each ending at the first surface or at its point, and how many of them
+        the mesh stopped more than ``skip_m`` short of their point.
+    """
+    if not len(segs) or not len(faces):
+        return segs, 0
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(verts, np.float32)),
+        o3d.core.Tensor(np.asarray(faces, np.uint32)),
+    )
+    a = segs[:, 0]
+    d = segs[:, 1] - a
+    length = np.linalg.norm(d, axis=1)
+    d = d / np.maximum(length, 1e-12)[:, None]
+    start = np.minimum(skip_m, length)
+    rays = np.hstack([a + start[:, None] * d, d]).astype(np.float32)
+    hit = start + scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+    end = np.minimum(hit, length)
+    out = segs.copy()
+    out[:, 1] = a + end[:, None] * d
+    return out, int((end < length - skip_m).sum())
 
 
 def voxel_grid(
@@ -211,19 +252,31 @@ def compute_volume(
 
 
 def person_freespace(
-    sfm_dir: str | Path, verts: np.ndarray, cfg: MeshConfig, where: str
-) -> tuple[FreeVolume, FreeSpace]:
+    sfm_dir: str | Path, verts: np.ndarray, faces: np.ndarray, cfg: MeshConfig, where: str
+) -> tuple[FreeVolume, FreeSpace, int]:
     """The free space of a person's photos: the 3-D free space, and its layer at the photos'
     median camera height as the 2-D free space (for the readers that work in a plane).
 
     Args:
         sfm_dir: the round's COLMAP model.
         verts: (V, 3) mesh vertices (m).
+        faces: (F, 3) mesh triangles: the lines of sight end at them (:func:`stop_at_surface`).
         cfg: mesh settings (``min_track_length``, ``max_point_range_m``, ``volume``).
         where: round name for error messages.
+
+    Returns:
+        The free volume, its layer, and how many lines of sight the mesh stopped short of
+        their point.
     """
     segs, cams = lines_of_sight(sfm_dir, cfg.min_track_length, cfg.max_point_range_m)
     pts = np.unique(segs[:, 1], axis=0) if len(segs) else np.zeros((0, 3))
+    segs, stopped = stop_at_surface(segs, verts, faces, cfg.volume.clearance_m)
+    if stopped:
+        log.info(
+            "%s: %d of %d lines of sight meet the mesh more than %g m before their point "
+            "(a point behind a surface): they end there",
+            where, stopped, len(segs), cfg.volume.clearance_m,
+        )  # fmt: skip
     if len(verts) and len(cams):  # the mesh around a camera left out of the bulk
         from scipy.spatial import cKDTree
 
@@ -233,4 +286,4 @@ def person_freespace(
     closed = not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
     plane = FreeSpace(mask, vol.origin[:2].copy(), vol.voxel, np.zeros((0, 2, 2)),
                       vol.clearance, closed)  # fmt: skip
-    return vol, plane
+    return vol, plane, stopped
