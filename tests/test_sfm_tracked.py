@@ -10,9 +10,13 @@ import pytest
 from scenebot.geometry import similarity_fit
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.photos import Photo
+from scenebot.sfm.place import place_left_out_photos, tracked_source
 from scenebot.sfm.tracked import (
+    drop_off_tracking,
     map_from_motion,
     pairs_the_tracking_disowns,
+    session_to_map,
+    tracked_priors,
     tracked_residuals,
     tracked_session,
 )
@@ -122,3 +126,75 @@ def test_a_person_map_failing_its_check_is_mapped_again_from_the_tracking_first(
     assert ways(tracked, "tracked")[0] == "global SfM"
     assert ways(tracked, "incremental", motion_map=False)[0] == "global SfM"
     assert ways([Photo(p.name, p.path) for p in tracked], "incremental")[0] == "global SfM"
+
+
+def moved_by(model: pycolmap.Reconstruction, iid: int, shift) -> None:
+    """Register image ``iid`` of ``model`` ``shift`` (map units) from where it is (its
+    rotation kept: a repeating texture matched one motif along)."""
+    im = model.image(iid)
+    R = im.cam_from_world().rotation.matrix()
+    centre = im.projection_center() + np.asarray(shift, float)
+    model.frame(im.frame_id).rig_from_world = pycolmap.Rigid3d(pycolmap.Rotation3d(R), -R @ centre)
+
+
+def test_a_sessions_frame_is_found_from_its_photos_despite_one_registered_off(dataset):
+    """The session-to-map similarity from the registered photos: rotation, scale and
+    translation of the fixture's tracking (30 deg, shifted) recovered with one photo
+    registered 1 m off; too few photos give none."""
+    _, truth = dataset
+    photos = tracked_photos(truth, 0.0)
+    model = pycolmap.Reconstruction(truth)
+    ids = sorted(model.reg_image_ids())
+    moved_by(model, ids[4], [1.0, 0.0, 0.0])
+    s, R, t, used = session_to_map(model, photos)
+    assert s == pytest.approx(1.0, abs=0.02)
+    c, sn = np.cos(0.5), np.sin(0.5)
+    assert np.allclose(R, np.array([[c, -sn, 0], [sn, c, 0], [0, 0, 1]]).T, atol=1e-6)
+    assert len(used) == 12  # the moved photo's rotation is right: it votes
+    for p in photos:
+        if p.name != model.image(ids[4]).name:
+            im = model.find_image_with_name(p.name)
+            assert np.linalg.norm(s * R @ p.motion.center + t - im.projection_center()) < 0.1
+    assert session_to_map(model, photos[:1]) is None
+
+
+def test_a_photo_registered_off_its_tracking_leaves_and_is_placed_back(dataset, tmp_path):
+    """A photo registered 1.5 m off its tracked pose leaves the map (the others stay); placed
+    again at its tracked pose (the session brought onto the map by the others), its matches
+    pull it back to its true place."""
+    db_path, truth = dataset
+    spread = float(np.median(np.ptp([truth.image(i).projection_center()
+                                      for i in truth.reg_image_ids()], axis=0)))  # fmt: skip
+    photos = tracked_photos(truth, 0.02 * spread / 3.0)
+    model = pycolmap.Reconstruction(truth)
+    ids = sorted(model.reg_image_ids())
+    name = model.image(ids[5]).name
+    moved_by(model, ids[5], [0.5 * spread, 0.0, 0.0])
+    cfg = SfmConfig(motion_prior_std_m=0.1 * spread, num_threads=1)
+    off = drop_off_tracking(model, photos, 3 * cfg.motion_prior_std_m)
+    assert list(off) == [name] and off[name] > 0.4 * spread
+    assert model.num_reg_images() == 11
+    dropped = {name: "registered off its tracking", "no_such.jpg": "not in the database"}
+    priors, why = tracked_priors(model, photos, set(dropped))
+    assert list(priors) == [name] and why == {}
+    true_centre = truth.find_image_with_name(name).projection_center()
+    prior_centre = priors[name].rotation.matrix().T @ -np.asarray(priors[name].translation)
+    assert np.linalg.norm(prior_centre - true_centre) < 0.05 * spread
+    placed = place_left_out_photos(model, db_path, tmp_path, photos, dropped, priors,
+                                   tracked_source(cfg), cfg)  # fmt: skip
+    assert placed["kept"] == [name] and placed["source"] == "its tracked motion"
+    assert name not in dropped and model.num_reg_images() == 12
+    back = model.find_image_with_name(name).projection_center()
+    assert np.linalg.norm(back - true_centre) < 0.01 * spread
+
+
+def test_a_session_with_one_registered_photo_gives_no_priors(dataset):
+    _, truth = dataset
+    photos = tracked_photos(truth, 0.0, session=lambda k: "round_001" if k >= 10 else "round_000")
+    photos[0] = Photo(photos[0].name, photos[0].path)  # no tracking
+    model = pycolmap.Reconstruction(truth)
+    gone = photos[11].name
+    model.deregister_frame(model.find_image_with_name(gone).frame_id)
+    priors, why = tracked_priors(model, photos, {gone, photos[0].name, photos[3].name})
+    assert set(priors) == {photos[3].name}
+    assert "round_001" in why[gone] and why[photos[0].name] == "no tracked motion"

@@ -279,6 +279,17 @@ class SfmConfig(Settings):
             "with 83.2% accuracy against 20.7% and 85.2% without them (docs/results.md)."
         ),
     )
+    place_tracked_photos: bool = Field(
+        True,
+        description=(
+            "A person's photos the map leaves out (not registered: a close-up of a repeating "
+            "wallpaper) that have a tracked motion (the capture log's motion) are placed as "
+            "place_left_out_photos places a robot's, at the pose their tracking gives once "
+            "the registered photos of their tracking session bring its frame onto the map "
+            "(scenebot.sfm.tracked.tracked_priors), with the position prior and tolerance "
+            "sfm.motion_prior_std_m and the heading's sfm.max_compass_deviation_deg."
+        ),
+    )
     place_prior_std_m: float = Field(
         0.03,
         gt=0.0,

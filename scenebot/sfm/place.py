@@ -1,4 +1,4 @@
-"""Photos the map left out, placed where the robot knows it took them.
+"""Photos the map left out, placed where the robot knows it took them (or a person's phone).
 
 Repeating texture (wallpaper, parquet, tiles) folds structure from motion: a group of photos
 registers consistently one pattern period away from where it was taken, or not at all when
@@ -13,12 +13,19 @@ position prior at the estimate. A placed photo stays in the map only when enough
 observations agree with its pose, its group of placed photos matches enough of the map's
 own points (:func:`anchored_observations`), and the pose is still within the estimate's
 tolerances; the others leave again, with the reason.
+
+A person's phone tracks its own motion (:mod:`scenebot.sfm.tracked`): a guided round's photos
+that do not register (close-ups of a repeating wallpaper: in the flat's guided campaign of
+2026-11-28, 14 of 37) are placed the same way at the pose their tracking gives once the
+round's registered photos bring its frame onto the map (:func:`~scenebot.sfm.tracked.
+tracked_priors`), with the tracking's prior (``sfm.motion_prior_std_m``).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pycolmap
@@ -46,17 +53,66 @@ from scenebot.sfm.register import (
 log = logging.getLogger(__name__)
 
 
+def robot_priors(
+    rec: pycolmap.Reconstruction,
+    photos: list[Photo],
+    dropped: dict[str, str],
+    camera_offset_m: tuple[float, float] | None,
+    cfg: SfmConfig,
+) -> dict[str, pycolmap.Rigid3d]:
+    """Where the robot's estimate puts the photos of ``dropped`` that have one
+    (cam_from_world, the map's camera height and mount pitch;
+    :func:`~scenebot.sfm.register.camera_priors`)."""
+    todo = [p for p in photos if p.name in dropped and p.localization is not None]
+    if not todo or rec.num_reg_images() < 2:
+        return {}
+    height, pitch = map_mount(rec)
+    return camera_priors(todo, camera_offset_m, cfg.camera_yaw_deg, height, pitch)
+
+
+@dataclass(frozen=True)
+class PriorSource:
+    """Where the placed photos' poses come from: its name in messages, how far the
+    adjustment may move a photo from it (:class:`~scenebot.sfm.register.Tolerance`) and the
+    position prior's standard deviation (m)."""
+
+    name: str
+    tolerance: Tolerance
+    prior_std_m: float
+
+
+def robot_source(cfg: SfmConfig) -> PriorSource:
+    """The robot's estimate: ``sfm.max_estimate_deviation_m``,
+    ``sfm.max_compass_deviation_deg``, ``sfm.place_prior_std_m``."""
+    return PriorSource(
+        "the robot's estimate",
+        Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg),
+        cfg.place_prior_std_m,
+    )
+
+
+def tracked_source(cfg: SfmConfig) -> PriorSource:
+    """A phone's tracked motion: its position known to ``sfm.motion_prior_std_m`` (also the
+    prior), its heading to ``sfm.max_compass_deviation_deg``."""
+    return PriorSource(
+        "its tracked motion",
+        Tolerance(cfg.motion_prior_std_m, cfg.max_compass_deviation_deg),
+        cfg.motion_prior_std_m,
+    )
+
+
 def place_left_out_photos(
     rec: pycolmap.Reconstruction,
     db_path: Path,
     image_root: Path,
     photos: list[Photo],
     dropped: dict[str, str],
-    camera_offset_m: tuple[float, float] | None,
+    priors: dict[str, pycolmap.Rigid3d],
+    source: PriorSource,
     cfg: SfmConfig,
 ) -> dict:
-    """Place the photos of ``dropped`` that have a robot estimate at it and keep those the
-    map then confirms (module docstring).
+    """Place the photos of ``dropped`` that have a prior pose at it and keep those the map
+    then confirms (module docstring).
 
     Args:
         rec: the model in the robot frame (modified: placed photos registered, their
@@ -66,32 +122,30 @@ def place_left_out_photos(
         photos: the photo set.
         dropped: photo name -> why it is not in the map (modified: placed photos leave
             it; photos placed and taken out again get the reason).
-        camera_offset_m: the camera centre in the robot frame (forward, left) (m).
-        cfg: sfm settings (``place_prior_std_m``, the
-            tolerances ``max_estimate_deviation_m`` / ``max_compass_deviation_deg``,
-            ``refine_max_error_px``, ``refine_iterations``).
+        priors: photo name -> its prior pose (cam_from_world, the map's frame):
+            :func:`robot_priors`, :func:`~scenebot.sfm.tracked.tracked_priors`.
+        source: what the priors are (:func:`robot_source`, :func:`tracked_source`).
+        cfg: sfm settings (``refine_max_error_px``, ``refine_iterations``).
 
     Returns:
-        report.json's ``placed``: ``tried``, ``kept`` (names), ``from_matches`` (photos
-        whose starting pose came from their gated map matches), ``taken_out`` (name ->
-        why), ``observations`` (name -> observations kept), ``seconds``.
+        report.json's ``placed``: ``source``, ``tried``, ``kept`` (names), ``from_matches``
+        (photos whose starting pose came from their gated map matches), ``taken_out`` (name
+        -> why), ``observations`` (name -> observations kept), ``seconds``.
     """
     t0 = time.perf_counter()
     stats: dict = {
-        "tried": 0, "kept": [], "from_matches": 0, "taken_out": {}, "observations": {},
-        "anchored": {},
+        "source": source.name, "tried": 0, "kept": [], "from_matches": 0, "taken_out": {},
+        "observations": {}, "anchored": {},
     }  # fmt: skip
-    todo = [p for p in photos if p.name in dropped and p.localization is not None]
+    todo = [p for p in photos if p.name in dropped and p.name in priors]
     if not todo or rec.num_reg_images() < 2:
         return stats | {"seconds": time.perf_counter() - t0}
-    height, pitch = map_mount(rec)
-    priors = camera_priors(todo, camera_offset_m, cfg.camera_yaw_deg, height, pitch)
     names = [p.name for p in photos]
     cache = database_cache(db_path, set(names), cfg.min_num_matches)
     opts = mapping_options(cfg, names, continuing=True, fix_focal=True)
     mapper = pycolmap.IncrementalMapper(cache)
     mapper.begin_reconstruction(rec)
-    tolerance = Tolerance(cfg.max_estimate_deviation_m, cfg.max_compass_deviation_deg)
+    tolerance = source.tolerance
     min_obs = opts.get_mapper().abs_pose_min_num_inliers
     existing = set(rec.point3D_ids())  # the map's own points: held in the adjustment
     placed: dict[int, pycolmap.Rigid3d] = {}
@@ -113,7 +167,7 @@ def place_left_out_photos(
     for _ in range(2):  # again from the adjusted poses: tracks the first poses missed
         for iid in placed:  # every placed photo registered first: they triangulate together
             mapper.triangulate_image(tri, iid)
-        _adjust_placed(mapper, placed, existing, cfg)
+        _adjust_placed(mapper, placed, existing, cfg, source.prior_std_m)
     anchors, group_anchors = anchored_observations(rec, set(placed), existing)
     for iid, prior in placed.items():
         im = rec.image(iid)
@@ -124,7 +178,7 @@ def place_left_out_photos(
         if why:
             mapper.observation_manager.deregister_frame(im.frame_id)
             stats["taken_out"][im.name] = why
-            dropped[im.name] = f"{dropped[im.name]}; placed at the robot's estimate: {why}"
+            dropped[im.name] = f"{dropped[im.name]}; placed at {source.name}: {why}"
             continue
         stats["kept"].append(im.name)
         stats["observations"][im.name] = n_obs
@@ -137,8 +191,9 @@ def place_left_out_photos(
     stats["seconds"] = time.perf_counter() - t0
     if placed:
         log.info(
-            "placed %d left-out photo(s) at the robot's estimate: %d kept, %d taken out again",
+            "placed %d left-out photo(s) at %s: %d kept, %d taken out again",
             len(placed),
+            source.name,
             len(stats["kept"]),
             len(stats["taken_out"]),
         )
@@ -154,9 +209,10 @@ def _starting_pose(
     cfg: SfmConfig,
     min_inliers: int,
 ) -> pycolmap.Rigid3d:
-    """The pose the photo's matches to map points give within the tolerances of the
-    robot's estimate (:func:`~scenebot.sfm.register.pose_near_estimate`; more exact than
-    the estimate), else the estimate itself."""
+    """The pose the photo's matches to map points give within the tolerances of its prior
+    (the robot's estimate, the tracked motion;
+    :func:`~scenebot.sfm.register.pose_near_estimate`: more exact than the prior), else the
+    prior itself."""
     _, xy, xyz = map_correspondences(rec, graph, iid, every=True)
     pose = pose_near_estimate(
         rec.image(iid).camera, prior, xy, xyz, tolerance, cfg.refine_max_error_px,
@@ -170,12 +226,13 @@ def _adjust_placed(
     placed: dict[int, pycolmap.Rigid3d],
     existing: set[int],
     cfg: SfmConfig,
+    prior_std_m: float,
 ) -> None:
     """``cfg.refine_iterations`` times: drop the placed photos' points' observations beyond
     ``cfg.refine_max_error_px``, then bundle-adjust the placed photos and their points
-    (Cauchy loss, 1 px) with a position prior (``cfg.place_prior_std_m``) at the robot's
-    estimate; every other pose and the intrinsics held. Filters once more at the end
-    (through the mapper's observation manager, which keeps count for triangulation)."""
+    (Cauchy loss, 1 px) with a position prior (``prior_std_m``) at their prior pose; every
+    other pose and the intrinsics held. Filters once more at the end (through the mapper's
+    observation manager, which keeps count for triangulation)."""
     rec = mapper.reconstruction
     delete = mapper.observation_manager.delete_observation
     ids = [i for i in placed if rec.image(i).has_pose]
@@ -185,14 +242,14 @@ def _adjust_placed(
     table = ObservationTable(rec, images_of(rec, points), points)
     opts = _ba_options(cfg.num_threads, False, False, cauchy_px=1.0)
     prior_opts = pycolmap.PosePriorBundleAdjustmentOptions()
-    prior_opts.prior_position_fallback_stddev = cfg.place_prior_std_m
+    prior_opts.prior_position_fallback_stddev = prior_std_m
     centres = {iid: camera_centre(placed[iid]) for iid in ids}
     for _ in range(max(cfg.refine_iterations, 1)):
         table.delete_beyond(rec, cfg.refine_max_error_px, delete)
         config = pycolmap.BundleAdjustmentConfig()
         for iid in ids:
             config.add_image(iid)
-        priors = position_priors(rec, centres, cfg.place_prior_std_m)
+        priors = position_priors(rec, centres, prior_std_m)
         for pid in points:  # the map's own points held; new ones with every observation
             if not rec.exists_point3D(pid):
                 continue
@@ -262,7 +319,7 @@ def _why_not_kept(
         )
     if not tolerance.agrees(pose, prior):
         return (
-            "the adjustment moved it beyond sfm.max_estimate_deviation_m / "
-            "sfm.max_compass_deviation_deg of the estimate"
+            f"the adjustment moved it beyond {tolerance.position_m:g} m / "
+            f"{tolerance.heading_deg:g} deg of its prior pose"
         )
     return None

@@ -59,7 +59,12 @@ from scenebot.sfm.photos import (
     photos_from_captures,
     photos_from_folder,
 )
-from scenebot.sfm.place import place_left_out_photos
+from scenebot.sfm.place import (
+    place_left_out_photos,
+    robot_priors,
+    robot_source,
+    tracked_source,
+)
 from scenebot.sfm.register import (
     camera_xy,
     global_refinement_checks,
@@ -67,8 +72,10 @@ from scenebot.sfm.register import (
     shot_poses,
 )
 from scenebot.sfm.tracked import (
+    drop_off_tracking,
     map_from_motion,
     pairs_the_tracking_disowns,
+    tracked_priors,
     tracked_residuals,
     tracked_session,
 )
@@ -125,6 +132,11 @@ class SfmOutputs:
     @property
     def map_png(self) -> Path:
         return self.model_dir / "map.png"
+
+
+TRACKED_OUTLIER_SIGMAS = 3.0
+"""A person's photo registered farther than this many ``sfm.motion_prior_std_m`` from where
+its tracked motion puts it is misregistered (:func:`_drop_inconsistent_photos`)."""
 
 
 def inputs_for_round(
@@ -1277,9 +1289,24 @@ def _log_not_in_map(dropped: dict[str, str]) -> None:
 def _drop_inconsistent_photos(
     s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, dropped: dict[str, str]
 ) -> None:
-    """Take photos registered far from the robot's own estimate or off their compass
-    reading out of ``rec`` (aligned), logged and added to ``dropped`` with reasons."""
+    """Take photos registered far from the robot's own estimate, from a person's tracked
+    motion (:func:`~scenebot.sfm.tracked.drop_off_tracking`) or off their compass reading out
+    of ``rec`` (aligned), logged and added to ``dropped`` with reasons."""
     cfg = s.cfg
+    if s.person:
+        off = drop_off_tracking(rec, s.photos, TRACKED_OUTLIER_SIGMAS * cfg.motion_prior_std_m)
+        if off:
+            log.warning(
+                "%d photo(s) registered far from where their phone's tracked motion puts them "
+                "(> %g x sfm.motion_prior_std_m = %.2f m; a repeating texture matched one motif "
+                "off), left out of the map: %s",
+                len(off), TRACKED_OUTLIER_SIGMAS, TRACKED_OUTLIER_SIGMAS * cfg.motion_prior_std_m,
+                ", ".join(f"{n} ({d:.2f} m)" for n, d in off.items()),
+            )  # fmt: skip
+            dropped.update(
+                {n: f"registered {d:.2f} m from where its tracked motion puts it"
+                 for n, d in off.items()}
+            )  # fmt: skip
     misplaced = drop_misplaced(
         rec, s.photos, alignment.camera_offset_m, cfg.max_estimate_deviation_m
     )
@@ -1312,14 +1339,24 @@ def _drop_inconsistent_photos(
 def _place_left_out(
     s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, dropped: dict[str, str]
 ) -> dict:
-    """With ``cfg.place_left_out_photos`` (a robot's photos): the photos left out placed at
-    the robot's estimate (:func:`place_left_out_photos`); report.json ``placed``."""
-    if not s.cfg.place_left_out_photos or s.person or not dropped:
+    """The photos left out placed at a prior pose and kept when the map confirms them
+    (:func:`place_left_out_photos`): a robot's at its estimate (``cfg.place_left_out_photos``),
+    a person's at their tracked motion (``cfg.place_tracked_photos``,
+    :func:`~scenebot.sfm.tracked.tracked_priors`); report.json ``placed``."""
+    on = s.cfg.place_tracked_photos if s.person else s.cfg.place_left_out_photos
+    if not on or not dropped:
         return {}
     t = time.perf_counter()
-    placed = place_left_out_photos(
-        rec, s.db_path, s.root, s.photos, dropped, alignment.camera_offset_m, s.cfg
-    )
+    if s.person:
+        priors, why = tracked_priors(rec, s.photos, set(dropped))
+        source = tracked_source(s.cfg)
+    else:
+        priors, why = robot_priors(rec, s.photos, dropped, alignment.camera_offset_m, s.cfg), {}
+        source = robot_source(s.cfg)
+    placed = place_left_out_photos(rec, s.db_path, s.root, s.photos, dropped, priors, source,
+                                   s.cfg)  # fmt: skip
+    if why:
+        placed["no_prior"] = why
     s.timings["place"] = time.perf_counter() - t
     return placed
 

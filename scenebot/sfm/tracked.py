@@ -224,3 +224,132 @@ def pairs_the_tracking_disowns(
         for a, b, *_ in contradicted
         if residuals.get(a, np.inf) <= max_residual_m and residuals.get(b, np.inf) <= max_residual_m
     ]
+
+
+MIN_SPAN_M = 0.5
+"""Two registered photos of a session this far apart (m, tracked) or more fix its scale."""
+SAME_ROTATION_DEG = 3.0
+"""Registered photos whose session-to-map rotations agree within this (deg) vote together."""
+
+
+def session_to_map(
+    rec: pycolmap.Reconstruction, members: list[Photo]
+) -> tuple[float, np.ndarray, np.ndarray, list[str]] | None:
+    """The similarity from a tracking session's frame to the map, from the session's
+    registered photos: the rotation that most photos' own poses agree with (each photo
+    gives one: its map rotation against its tracked one), the scale the median ratio of
+    their distances (pairs at least :data:`MIN_SPAN_M` apart in the tracking), the
+    translation the median of their centres' offsets. Robust to a photo registered one
+    motif off; None with fewer than two agreeing photos or no pair far enough apart.
+
+    Returns:
+        ``(s, R, t)`` with ``x_map = s R x_session + t``, and the photos it rests on.
+    """
+    reg = [(p, rec.find_image_with_name(p.name)) for p in members]
+    reg = [(p, im) for p, im in reg if im is not None and im.has_pose]
+    if len(reg) < 2:
+        return None
+    rots = [im.cam_from_world().rotation.matrix().T @ p.motion.rotation for p, im in reg]
+    cos_same = np.cos(np.radians(SAME_ROTATION_DEG))
+
+    def agree(Ra: np.ndarray) -> np.ndarray:
+        return np.array([(np.trace(Ra.T @ Rb) - 1) / 2 >= cos_same for Rb in rots])
+
+    votes = [agree(Ra) for Ra in rots]
+    best = int(np.argmax([v.sum() for v in votes]))
+    keep = votes[best]
+    if keep.sum() < 2:
+        return None
+    u, _, vt = np.linalg.svd(sum(r for r, k in zip(rots, keep, strict=True) if k))
+    R = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt  # the chordal mean
+    used = [pi for pi, k in zip(reg, keep, strict=True) if k]
+    src = np.array([p.motion.center for p, _ in used])
+    dst = np.array([im.projection_center() for _, im in used])
+    i, j = np.triu_indices(len(used), 1)
+    span = np.linalg.norm(src[i] - src[j], axis=1)
+    far = span >= MIN_SPAN_M
+    if not far.any():
+        return None
+    s = float(np.median(np.linalg.norm(dst[i] - dst[j], axis=1)[far] / span[far]))
+    t = np.median(dst - s * src @ R.T, axis=0)
+    return s, R, t, [p.name for p, _ in used]
+
+
+def tracked_priors(
+    rec: pycolmap.Reconstruction, photos: list[Photo], names: set[str]
+) -> tuple[dict[str, pycolmap.Rigid3d], dict[str, str]]:
+    """Where their tracked motion puts the photos ``names`` in the map (cam_from_world):
+    each tracking session's frame brought onto the map through its registered photos
+    (:func:`session_to_map`).
+
+    Returns:
+        Photo name -> pose, and photo name -> why it has none (no tracked motion, too few
+        registered photos of its session).
+    """
+    out: dict[str, pycolmap.Rigid3d] = {}
+    why: dict[str, str] = {}
+    sessions: dict[str, list[Photo]] = {}
+    for p in photos:
+        if p.motion is not None:
+            sessions.setdefault(p.motion.session, []).append(p)
+    for p in photos:
+        if p.name in names and p.motion is None:
+            why[p.name] = "no tracked motion"
+    for session, members in sessions.items():
+        todo = [p for p in members if p.name in names]
+        if not todo:
+            continue
+        fit = session_to_map(rec, [p for p in members if p.name not in names])
+        if fit is None:
+            for p in todo:
+                why[p.name] = (
+                    f"fewer than two registered photos of its tracking session {session} "
+                    f"agree on its frame, at least {MIN_SPAN_M} m apart"
+                )
+            continue
+        s, R, t, _ = fit
+        for p in todo:
+            rot = p.motion.rotation @ R.T
+            centre = s * R @ p.motion.center + t
+            out[p.name] = pycolmap.Rigid3d(pycolmap.Rotation3d(rot), -rot @ centre)
+    return out, why
+
+
+def drop_off_tracking(
+    rec: pycolmap.Reconstruction, photos: list[Photo], max_m: float
+) -> dict[str, float]:
+    """Deregister the photos registered farther than ``max_m`` (the map's units) from where
+    their tracking session puts them once its frame is brought onto the map by its
+    registered photos (:func:`session_to_map`, robust to a few such photos): a close-up of a
+    repeating wallpaper registers confidently one motif off, and the phone's tracking is
+    independent evidence (the robot's estimate, for a robot:
+    :func:`~scenebot.sfm.stage.drop_misplaced`). Sessions whose frame cannot be fitted are
+    not checked.
+
+    Returns:
+        Name -> distance (m) of the photos taken out.
+    """
+    sessions: dict[str, list[Photo]] = {}
+    for p in photos:
+        if p.motion is not None:
+            sessions.setdefault(p.motion.session, []).append(p)
+    out: dict[str, float] = {}
+    for members in sessions.values():
+        fit = session_to_map(rec, members)
+        if fit is None:
+            continue
+        s, R, t, _ = fit
+        for p in members:
+            im = rec.find_image_with_name(p.name)
+            if im is None or not im.has_pose:
+                continue
+            d = float(np.linalg.norm(s * R @ p.motion.center + t - im.projection_center()))
+            if d > max_m:
+                out[p.name] = d
+    for name in out:
+        rec.deregister_frame(rec.find_image_with_name(name).frame_id)
+    if out:
+        for pid in list(rec.point3D_ids()):
+            if rec.point3D(pid).track.length() < 2:
+                rec.delete_point3D(pid)
+    return out
