@@ -505,6 +505,8 @@ def run(cfg: SfmConfig, inputs: SfmInputs, outputs: SfmOutputs, person: bool = F
     orientation = _drop_pairs_against_orientation(s)
     s.fix_focal = _focal_fixed(cfg, s.photos)
     mres = _map(s)
+    if s.person:
+        _drop_off_tracking(s, mres.reconstruction, mres.dropped)
     short_round = _check_registered(cfg, mres, len(s.photos), s.previous)
 
     mres, alignment, scale_checks = _align(s, mres)
@@ -1067,6 +1069,7 @@ def _check_person_map(
                 m2 = remap()
                 if m2 is None:
                     raise SfmError("no tracking session of three photos with features")
+                _drop_off_tracking(s, m2.reconstruction, m2.dropped)
                 a2 = _person_alignment(s, m2)
             except (SfmError, ValueError) as exc:
                 log.warning("%s failed: %s", how, exc)
@@ -1286,6 +1289,29 @@ def _log_not_in_map(dropped: dict[str, str]) -> None:
         )
 
 
+def _drop_off_tracking(s: _Session, rec: pycolmap.Reconstruction, dropped: dict[str, str]) -> None:
+    """A person's photos registered far from where their tracked motion puts them out of
+    ``rec`` (:func:`~scenebot.sfm.tracked.drop_off_tracking`, beyond
+    :data:`TRACKED_OUTLIER_SIGMAS` ``sfm.motion_prior_std_m``), logged and added to
+    ``dropped``: before the person check (a photo registered one motif off contradicts
+    the pairs of the photos it sees, and the check would map every photo again) and after
+    the map's last change."""
+    bound = TRACKED_OUTLIER_SIGMAS * s.cfg.motion_prior_std_m
+    off = drop_off_tracking(rec, s.photos, bound)
+    if not off:
+        return
+    log.warning(
+        "%d photo(s) registered far from where their phone's tracked motion puts them "
+        "(> %g x sfm.motion_prior_std_m = %.2f m; a repeating texture matched one motif "
+        "off), left out of the map: %s",
+        len(off), TRACKED_OUTLIER_SIGMAS, bound,
+        ", ".join(f"{n} ({d:.2f} m)" for n, d in off.items()),
+    )  # fmt: skip
+    dropped.update(
+        {n: f"registered {d:.2f} m from where its tracked motion puts it" for n, d in off.items()}
+    )
+
+
 def _drop_inconsistent_photos(
     s: _Session, rec: pycolmap.Reconstruction, alignment: Alignment, dropped: dict[str, str]
 ) -> None:
@@ -1294,19 +1320,7 @@ def _drop_inconsistent_photos(
     of ``rec`` (aligned), logged and added to ``dropped`` with reasons."""
     cfg = s.cfg
     if s.person:
-        off = drop_off_tracking(rec, s.photos, TRACKED_OUTLIER_SIGMAS * cfg.motion_prior_std_m)
-        if off:
-            log.warning(
-                "%d photo(s) registered far from where their phone's tracked motion puts them "
-                "(> %g x sfm.motion_prior_std_m = %.2f m; a repeating texture matched one motif "
-                "off), left out of the map: %s",
-                len(off), TRACKED_OUTLIER_SIGMAS, TRACKED_OUTLIER_SIGMAS * cfg.motion_prior_std_m,
-                ", ".join(f"{n} ({d:.2f} m)" for n, d in off.items()),
-            )  # fmt: skip
-            dropped.update(
-                {n: f"registered {d:.2f} m from where its tracked motion puts it"
-                 for n, d in off.items()}
-            )  # fmt: skip
+        _drop_off_tracking(s, rec, dropped)
     misplaced = drop_misplaced(
         rec, s.photos, alignment.camera_offset_m, cfg.max_estimate_deviation_m
     )
