@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from scenebot.geometry import similarity_fit
 from scenebot.sfm.config import SfmConfig
 from scenebot.sfm.features import database_cache
 from scenebot.sfm.mapping import (
@@ -187,28 +186,27 @@ def map_from_motion(
 
 
 def tracked_residuals(rec: pycolmap.Reconstruction, photos: list[Photo]) -> dict[str, float]:
-    """How far (m, the tracking's scale) each registered photo of the largest tracking
-    session lies in the map from where its tracking puts it, after a similarity fit of the
-    tracked centres onto the map's (fitted again to the photos within three median
-    residuals of the first fit); empty with fewer than three such photos."""
-    found = tracked_session(photos)
-    if found is None:
-        return {}
-    tracked = {p.name: p.motion.center for p in found[1]}
-    names = [rec.image(i).name for i in rec.reg_image_ids() if rec.image(i).name in tracked]
-    if len(names) < 3:
-        return {}
-    src = np.array([tracked[n] for n in names])
-    dst = np.array([rec.image(i).projection_center() for i in rec.reg_image_ids()
-                    if rec.image(i).name in tracked])  # fmt: skip
-    keep = np.ones(len(names), bool)
-    for _ in range(2):
-        s, R, t = similarity_fit(src[keep], dst[keep])
-        res = np.linalg.norm(s * src @ R.T + t - dst, axis=1) / s
-        keep = res <= max(3.0 * float(np.median(res)), 1e-6)
-        if keep.sum() < 3:
-            break
-    return dict(zip(names, (float(r) for r in res), strict=True))
+    """How far (m, the tracking's scale: the map's may be any) each registered photo with a
+    tracked motion lies from where its tracking session puts it, the session's frame
+    brought onto the map by its registered photos (:func:`session_to_map`, robust to a few
+    photos registered off); photos of a session whose frame cannot be fitted are left
+    out."""
+    sessions: dict[str, list[Photo]] = {}
+    for p in photos:
+        if p.motion is not None:
+            sessions.setdefault(p.motion.session, []).append(p)
+    out: dict[str, float] = {}
+    for members in sessions.values():
+        fit = session_to_map(rec, members)
+        if fit is None:
+            continue
+        s, R, t, _ = fit
+        for p in members:
+            im = rec.find_image_with_name(p.name)
+            if im is not None and im.has_pose:
+                d = np.linalg.norm(s * R @ p.motion.center + t - im.projection_center())
+                out[p.name] = float(d / s)
+    return out
 
 
 def pairs_the_tracking_disowns(
@@ -318,7 +316,7 @@ def tracked_priors(
 def drop_off_tracking(
     rec: pycolmap.Reconstruction, photos: list[Photo], max_m: float
 ) -> dict[str, float]:
-    """Deregister the photos registered farther than ``max_m`` (the map's units) from where
+    """Deregister the photos registered farther than ``max_m`` (m, the tracking's scale) from where
     their tracking session puts them once its frame is brought onto the map by its
     registered photos (:func:`session_to_map`, robust to a few such photos): a close-up of a
     repeating wallpaper registers confidently one motif off, and the phone's tracking is
@@ -329,23 +327,7 @@ def drop_off_tracking(
     Returns:
         Name -> distance (m) of the photos taken out.
     """
-    sessions: dict[str, list[Photo]] = {}
-    for p in photos:
-        if p.motion is not None:
-            sessions.setdefault(p.motion.session, []).append(p)
-    out: dict[str, float] = {}
-    for members in sessions.values():
-        fit = session_to_map(rec, members)
-        if fit is None:
-            continue
-        s, R, t, _ = fit
-        for p in members:
-            im = rec.find_image_with_name(p.name)
-            if im is None or not im.has_pose:
-                continue
-            d = float(np.linalg.norm(s * R @ p.motion.center + t - im.projection_center()))
-            if d > max_m:
-                out[p.name] = d
+    out = {n: d for n, d in tracked_residuals(rec, photos).items() if d > max_m}
     for name in out:
         rec.deregister_frame(rec.find_image_with_name(name).frame_id)
     if out:
