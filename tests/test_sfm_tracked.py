@@ -198,3 +198,18 @@ def test_a_session_with_one_registered_photo_gives_no_priors(dataset):
     priors, why = tracked_priors(model, photos, {gone, photos[0].name, photos[3].name})
     assert set(priors) == {photos[3].name}
     assert "round_001" in why[gone] and why[photos[0].name] == "no tracked motion"
+
+
+def test_every_session_has_residuals_in_the_trackings_metres(dataset):
+    """Residuals for the photos of every session (a pair between a round-0 photo and a
+    round-1 photo is judged too), in the tracking's scale whatever the map's."""
+    _, truth = dataset
+    photos = tracked_photos(truth, 0.0, session=lambda k: "round_001" if k >= 6 else "round_000")
+    model = pycolmap.Reconstruction(truth)
+    model.transform(pycolmap.Sim3d(3.0, pycolmap.Rotation3d(), np.zeros(3)))  # any scale
+    ids = sorted(model.reg_image_ids())
+    moved_by(model, ids[8], [3.0, 0.0, 0.0])  # 1 m in the tracking's metres
+    res = tracked_residuals(model, photos)
+    assert len(res) == 12
+    assert res[model.image(ids[8]).name] == pytest.approx(1.0, rel=0.05)
+    assert max(v for k, v in res.items() if k != model.image(ids[8]).name) < 1e-6
