@@ -280,6 +280,36 @@ def test_shots_no_photo_fulfilled_are_not_asked_for_again(room_map, tmp_path):
     assert (tmp_path / "goals.png").stat().st_size > 20_000
 
 
+def test_close_ups_are_not_asked_for(room_map, tmp_path):
+    """No shot sees its surface from nearer than goals.person_min_depth_m (a close-up of a
+    wall does not register); a bound no candidate meets leaves the overlap ignored, and 0
+    turns it off."""
+    from scenebot.artifacts.mesh import read_mesh
+    from scenebot.goals.depth import view_depths
+
+    V, F = read_mesh(room_map["out"].mesh_ply)
+    gi = GoalsInputs(room_map["so"].candidates_csv, room_map["out"].freespace_npz,
+                     room_map["root"] / "sfm", mesh_ply=room_map["out"].mesh_ply)  # fmt: skip
+    c = read_candidates(room_map["so"].candidates_csv)
+    poses = np.column_stack([c[k] for k in ("x", "y", "z", "theta", "pitch")])
+    depth = view_depths(poses, 60.0, 0.75, V, F)
+    bound = float(np.quantile(depth[np.isfinite(depth)], 0.5))  # half the candidates closer
+    docs = {}
+    for b in (0.0, bound):
+        cfg = GoalsConfig(k=4, min_matchable_points=0, person_min_depth_m=b)
+        out = GoalsOutputs(tmp_path / f"goals{b}.json", tmp_path / f"goals{b}.png")
+        docs[b] = run_goals(cfg, gi, out, person=True)
+    assert docs[0.0]["close_ups"] == 0 and docs[bound]["close_ups"] > 0
+    assert docs[bound]["n_valid"] < docs[0.0]["n_valid"]
+    g = np.array([[x[k] for k in ("x", "y", "z", "theta", "pitch")] for x in docs[bound]["goals"]])
+    intr = syn.default_intrinsics()
+    hfov = float(np.degrees(2 * np.arctan(0.5 * intr.width / intr.fx)))
+    assert len(g) and (view_depths(g, hfov, intr.height / intr.width, V, F) >= bound).all()
+    cfg = GoalsConfig(k=4, min_matchable_points=0, person_min_depth_m=1000.0)
+    out = GoalsOutputs(tmp_path / "far.json", tmp_path / "far.png")
+    assert run_goals(cfg, gi, out, person=True)["goals"]  # every candidate close: ignored
+
+
 def _rewrite(src, dst, **cols):
     """A copy of candidates.csv with some columns replaced."""
     c = read_candidates(src)

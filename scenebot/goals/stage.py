@@ -262,6 +262,35 @@ COVERAGE_VERTICES = 20000
 """Mesh vertices (a seeded sample) whose photo counts the coverage picture shows."""
 
 
+def _close_ups(cfg: GoalsConfig, poses: np.ndarray, which: np.ndarray, inputs) -> np.ndarray:
+    """(N,) bool: which of the candidates ``which`` see the round's mesh from nearer than
+    ``goals.person_min_depth_m`` (median depth, :func:`~scenebot.goals.depth.view_depths`;
+    the map's median photo's field of view). None without a mesh or with the bound 0."""
+    out = np.zeros(len(poses), bool)
+    if cfg.person_min_depth_m <= 0 or inputs.mesh_ply is None or inputs.sfm_dir is None:
+        return out
+    if not which.any():
+        return out
+    from scenebot.artifacts.mesh import read_mesh
+    from scenebot.goals.depth import view_depths
+
+    smap = read_sparse_map(inputs.sfm_dir)
+    if not smap.intrinsics:
+        return out
+    intr = smap.intrinsics[len(smap.intrinsics) // 2]
+    hfov = float(np.degrees(2 * np.arctan(0.5 * intr.width / intr.fx)))
+    aspect = (intr.height / intr.fy) / (intr.width / intr.fx)
+    V, F = read_mesh(inputs.mesh_ply)
+    idx = np.flatnonzero(which)
+    out[idx] = view_depths(poses[idx], hfov, aspect, V, F) < cfg.person_min_depth_m
+    log.info(
+        "%d of %d registrable candidates see their surface from nearer than "
+        "goals.person_min_depth_m = %g m (a close-up does not register): not asked for",
+        int(out.sum()), len(idx), cfg.person_min_depth_m,
+    )  # fmt: skip
+    return out
+
+
 def _person_min_matchable(cfg: GoalsConfig, sfm_dir: Path | None) -> int:
     """The map points a person's shot must be predicted to match: ``goals.min_matchable_points``,
     or ``goals.person_min_matchable_share`` of what the map's median photo observes when
@@ -309,12 +338,15 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     registrable = (cols["seen_fraction"] >= cfg.min_seen_fraction) & (
         cols["matchable_points"] >= min_points
     )
+    close = _close_ups(cfg, poses, valid & registrable, inputs)
+    registrable &= ~close
     if (valid & registrable).any():
         valid &= registrable
     elif valid.any():
         log.warning("%s: no candidate could be registered (goals.min_seen_fraction, "
                     "goals.min_matchable_points, goals.person_min_matchable_share: %d "
-                    "points); goals ignore the overlap", where, min_points)  # fmt: skip
+                    "points, goals.person_min_depth_m); goals ignore the overlap",
+                    where, min_points)  # fmt: skip
     abandoned = unfulfilled_shots(inputs.fulfilment_json)
     avoided = _avoid_abandoned(valid, poses, abandoned, cfg.nms_radius_m, where)
     score = np.where(valid, cols["score_deg"], np.nan)
@@ -333,6 +365,8 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
             "n_in_free_space": int(inside.sum()),
             "min_seen_fraction": cfg.min_seen_fraction,
             "min_matchable_points": min_points,
+            "min_depth_m": cfg.person_min_depth_m,
+            "close_ups": int(close.sum()),
             "best_score_any_deg": _best(np.where(any_valid, cols["score_deg"], np.nan)),
             "nms_radius_m": cfg.nms_radius_m,
             "nms_angle_deg": cfg.nms_angle_deg,
