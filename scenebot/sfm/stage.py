@@ -136,7 +136,7 @@ class SfmOutputs:
 
 TRACKED_OUTLIER_SIGMAS = 3.0
 """A person's photo registered farther than this many ``sfm.motion_prior_std_m`` from where
-its tracked motion puts it is misregistered (:func:`_drop_inconsistent_photos`)."""
+its tracked motion puts it is misregistered (:func:`_drop_off_tracking`)."""
 
 
 def inputs_for_round(
