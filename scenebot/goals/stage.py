@@ -262,10 +262,12 @@ COVERAGE_VERTICES = 20000
 """Mesh vertices (a seeded sample) whose photo counts the coverage picture shows."""
 
 
-def _close_ups(cfg: GoalsConfig, poses: np.ndarray, which: np.ndarray, inputs) -> np.ndarray:
+def _close_ups(
+    cfg: GoalsConfig, poses: np.ndarray, which: np.ndarray, inputs: GoalsInputs
+) -> np.ndarray:
     """(N,) bool: which of the candidates ``which`` see the round's mesh from nearer than
     ``goals.person_min_depth_m`` (median depth, :func:`~scenebot.goals.depth.view_depths`;
-    the map's median photo's field of view). None without a mesh or with the bound 0."""
+    the map's median photo's field of view); none without a mesh or with the bound 0."""
     out = np.zeros(len(poses), bool)
     if cfg.person_min_depth_m <= 0 or inputs.mesh_ply is None or inputs.sfm_dir is None:
         return out
