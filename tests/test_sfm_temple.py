@@ -150,7 +150,7 @@ def test_photos_of_an_unrelated_scene_are_named_and_left_out(tmp_path, caplog):
     digest = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in folder.iterdir()}
     with caplog.at_level(logging.WARNING):
         rep = run(
-            SfmConfig(),
+            SfmConfig(num_threads=1),  # one thread: the same map every run
             SfmInputs(tmp_path / "db.db", photo_folder=folder),
             SfmOutputs(tmp_path / "sfm"),
         )
