@@ -263,26 +263,24 @@ COVERAGE_VERTICES = 20000
 
 
 def _close_ups(
-    cfg: GoalsConfig, poses: np.ndarray, which: np.ndarray, inputs: GoalsInputs
+    cfg: GoalsConfig, poses: np.ndarray, which: np.ndarray, mesh_ply: Path | None, smap
 ) -> np.ndarray:
     """(N,) bool: which of the candidates ``which`` see the round's mesh from nearer than
     ``goals.person_min_depth_m`` (median depth, :func:`~scenebot.goals.depth.view_depths`;
-    the map's median photo's field of view); none without a mesh or with the bound 0."""
+    the field of view of ``smap``'s median photo); none without a mesh or a map, or with
+    the bound 0."""
     out = np.zeros(len(poses), bool)
-    if cfg.person_min_depth_m <= 0 or inputs.mesh_ply is None or inputs.sfm_dir is None:
+    if cfg.person_min_depth_m <= 0 or mesh_ply is None or smap is None or not smap.intrinsics:
         return out
     if not which.any():
         return out
     from scenebot.artifacts.mesh import read_mesh
     from scenebot.goals.depth import view_depths
 
-    smap = read_sparse_map(inputs.sfm_dir)
-    if not smap.intrinsics:
-        return out
     intr = smap.intrinsics[len(smap.intrinsics) // 2]
     hfov = float(np.degrees(2 * np.arctan(0.5 * intr.width / intr.fx)))
     aspect = (intr.height / intr.fy) / (intr.width / intr.fx)
-    V, F = read_mesh(inputs.mesh_ply)
+    V, F = read_mesh(mesh_ply)
     idx = np.flatnonzero(which)
     out[idx] = view_depths(poses[idx], hfov, aspect, V, F) < cfg.person_min_depth_m
     log.info(
@@ -340,7 +338,8 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     registrable = (cols["seen_fraction"] >= cfg.min_seen_fraction) & (
         cols["matchable_points"] >= min_points
     )
-    close = _close_ups(cfg, poses, valid & registrable, inputs)
+    smap = read_sparse_map(inputs.sfm_dir) if inputs.sfm_dir is not None else None
+    close = _close_ups(cfg, poses, valid & registrable, inputs.mesh_ply, smap)
     registrable &= ~close
     if (valid & registrable).any():
         valid &= registrable
@@ -357,7 +356,6 @@ def _person_goals(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, 
     )
     chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
     scored = any_valid & np.isfinite(cols["score_deg"])
-    smap = read_sparse_map(inputs.sfm_dir) if inputs.sfm_dir is not None else None
     coverage = _coverage(inputs.mesh_ply, smap)
     doc = goals_document(
         poses, score, chosen, cfg.complete_threshold_deg, where,

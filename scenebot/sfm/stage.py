@@ -1300,6 +1300,7 @@ def _drop_off_tracking(s: _Session, rec: pycolmap.Reconstruction, dropped: dict[
     off = drop_off_tracking(rec, s.photos, bound)
     if not off:
         return
+    _delete_loose_points(rec)
     log.warning(
         "%d photo(s) registered far from where their phone's tracked motion puts them "
         "(> %g x sfm.motion_prior_std_m = %.2f m; a repeating texture matched one motif "

@@ -191,10 +191,7 @@ def tracked_residuals(rec: pycolmap.Reconstruction, photos: list[Photo]) -> dict
     brought onto the map by its registered photos (:func:`session_to_map`, robust to a few
     photos registered off); photos of a session whose frame cannot be fitted are left
     out."""
-    sessions: dict[str, list[Photo]] = {}
-    for p in photos:
-        if p.motion is not None:
-            sessions.setdefault(p.motion.session, []).append(p)
+    sessions = by_session(photos)
     out: dict[str, float] = {}
     for members in sessions.values():
         fit = session_to_map(rec, members)
@@ -228,6 +225,15 @@ MIN_SPAN_M = 0.5
 """Two registered photos of a session this far apart (m, tracked) or more fix its scale."""
 SAME_ROTATION_DEG = 3.0
 """Registered photos whose session-to-map rotations agree within this (deg) vote together."""
+
+
+def by_session(photos: list[Photo]) -> dict[str, list[Photo]]:
+    """The photos with a tracked motion, by tracking session."""
+    out: dict[str, list[Photo]] = {}
+    for p in photos:
+        if p.motion is not None:
+            out.setdefault(p.motion.session, []).append(p)
+    return out
 
 
 def session_to_map(
@@ -286,10 +292,7 @@ def tracked_priors(
     """
     out: dict[str, pycolmap.Rigid3d] = {}
     why: dict[str, str] = {}
-    sessions: dict[str, list[Photo]] = {}
-    for p in photos:
-        if p.motion is not None:
-            sessions.setdefault(p.motion.session, []).append(p)
+    sessions = by_session(photos)
     for p in photos:
         if p.name in names and p.motion is None:
             why[p.name] = "no tracked motion"
@@ -316,13 +319,13 @@ def tracked_priors(
 def drop_off_tracking(
     rec: pycolmap.Reconstruction, photos: list[Photo], max_m: float
 ) -> dict[str, float]:
-    """Deregister the photos registered farther than ``max_m`` (m, the tracking's scale) from where
-    their tracking session puts them once its frame is brought onto the map by its
+    """Deregister the photos registered farther than ``max_m`` (m, the tracking's scale) from
+    where their tracking session puts them once its frame is brought onto the map by its
     registered photos (:func:`session_to_map`, robust to a few such photos): a close-up of a
     repeating wallpaper registers confidently one motif off, and the phone's tracking is
     independent evidence (the robot's estimate, for a robot:
     :func:`~scenebot.sfm.stage.drop_misplaced`). Sessions whose frame cannot be fitted are
-    not checked.
+    not checked. The points left with fewer than two observations are the caller's to delete.
 
     Returns:
         Name -> distance (m) of the photos taken out.
@@ -330,8 +333,4 @@ def drop_off_tracking(
     out = {n: d for n, d in tracked_residuals(rec, photos).items() if d > max_m}
     for name in out:
         rec.deregister_frame(rec.find_image_with_name(name).frame_id)
-    if out:
-        for pid in list(rec.point3D_ids()):
-            if rec.point3D(pid).track.length() < 2:
-                rec.delete_point3D(pid)
     return out
