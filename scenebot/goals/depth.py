@@ -12,7 +12,9 @@ across the room (:mod:`scenebot.score.matchable`).
 
 :func:`view_depths` measures a view's median depth on the round's Poisson mesh (rays on a
 coarse grid over the image), and the goals stage asks for no shot nearer than
-``goals.person_min_depth_m``.
+``goals.person_min_depth_m`` (off by default: the flat's campaign with 0.8 m came out worse,
+55.2% against 66.1% at 2 cm, its map less accurate for a reason of its own; the office's
+95.1%).
 """
 
 from __future__ import annotations
