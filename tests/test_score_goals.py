@@ -197,7 +197,7 @@ def test_goals_keep_enough_photographed_surface_to_register(scored_room, tmp_pat
             GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz),
             go,
         )
-        idx = [g["candidate"] for g in doc["goals"]]
+        idx = [g["candidate"] for g in doc["goals"] if not g.get("frontier")]
         assert idx
         seen[m] = cols["seen_fraction"][idx]
         assert doc["best_score_any_deg"] >= doc["best_score_deg"]
@@ -223,7 +223,7 @@ def test_goals_see_enough_map_points_to_register(scored_room, tmp_path):
             GoalsOutputs(tmp_path / f"goals_{n}.json"),
         )
         assert doc["min_matchable_points"] == n
-        chosen[n] = m[[g["candidate"] for g in doc["goals"]]]
+        chosen[n] = m[[g["candidate"] for g in doc["goals"] if not g.get("frontier")]]
     assert len(chosen[100]) >= 1 and chosen[100].min() >= 100
     assert chosen[0].min() < 100
 
@@ -254,7 +254,9 @@ def test_a_round_that_buys_too_little_completes_exploration(
         prev.write_text(json.dumps({"mean_score_deg": previous_mean * mean,
                                     "free_area_m2": previous_area * area}))  # fmt: skip
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=1),
+        # the room's unphotographed east is an open frontier, which keeps any map going
+        # (test_open_frontiers.py): the stopping rule alone here
+        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=1, open_frontiers=False),
         GoalsInputs(
             scored_room["so"].candidates_csv,
             scored_room["mo"].freespace_npz,
@@ -287,7 +289,9 @@ def test_a_round_that_added_no_photo_shows_no_diminishing_returns(
                                 "map_images": previous_images,
                                 "score_gain": {"low_rounds": 1}}))  # fmt: skip
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=2),
+        GoalsConfig(
+            k=6, min_score_gain=0.15, min_area_gain=0.1, patience=2, open_frontiers=False
+        ),  # the stopping rule alone (see above)
         GoalsInputs(
             scored_room["so"].candidates_csv,
             scored_room["mo"].freespace_npz,
@@ -365,7 +369,7 @@ def _goals_after(scored_room, prev_doc: dict, prev, log):
     """Round 3's goals after a round 2 whose goals.json says ``prev_doc``."""
     prev.write_text(json.dumps(prev_doc))
     return run_goals(
-        GoalsConfig(k=6, patience=2, min_matchable_points=0),
+        GoalsConfig(k=6, patience=2, min_matchable_points=0, open_frontiers=False),
         GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz,
                     scored_room["root"] / "sfm", prev, capture_logs=[log]),
         GoalsOutputs(prev.parent.parent / "round_003" / "goals.json"),
@@ -435,7 +439,9 @@ def test_a_round_whose_photos_mostly_missed_the_map_is_idle_not_complete(
                 "idle": {"rounds": idle_before, "history": [[3, 25]]}}  # fmt: skip
     prev.write_text(json.dumps(prev_doc))
     doc = run_goals(
-        GoalsConfig(k=6, min_score_gain=0.15, min_area_gain=0.1, patience=2),
+        GoalsConfig(
+            k=6, min_score_gain=0.15, min_area_gain=0.1, patience=2, open_frontiers=False
+        ),  # the stopping rule alone (see above)
         GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz, sfm, prev),
         GoalsOutputs(tmp_path / "round_001" / "goals.json"),
     )

@@ -51,6 +51,30 @@ def point_segment_distance(p: np.ndarray, seg: np.ndarray, chunk: int = 2048) ->
     return out
 
 
+def wall_raster(
+    segments: np.ndarray, shape: tuple[int, int], origin: np.ndarray, resolution: float
+) -> np.ndarray:
+    """(ny, nx) bool: the cells the cut ``segments`` (M, 2, 2) (m) pass through (sampled every
+    half cell along each segment)."""
+    wall = np.zeros(shape, bool)
+    segs = np.asarray(segments, np.float64).reshape(-1, 2, 2)
+    if len(segs):
+        L = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
+        n = np.maximum(2, np.ceil(L / (0.5 * resolution)).astype(int) + 1)
+        rep = np.repeat(np.arange(len(segs)), n)
+        t = np.concatenate([np.linspace(0, 1, k) for k in n])
+        p = segs[rep, 0] + t[:, None] * (segs[rep, 1] - segs[rep, 0])
+        ij = np.floor((p - origin) / resolution).astype(int)
+        ok = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < shape[1]) & (ij[:, 1] < shape[0])
+        wall[ij[ok, 1], ij[ok, 0]] = True
+    return wall
+
+
+CLEARANCE_CELLS = 0.71
+"""A cell is free only when its centre lies farther than the robot radius plus this many cells
+(half a cell's diagonal) from the centre of every wall cell."""
+
+
 @dataclass
 class FreeSpace:
     """The free space of one round.
@@ -91,6 +115,21 @@ class FreeSpace:
         inside = ok & self.mask[j, i]
         clear = point_segment_distance(xy, self.segments) >= self.robot_radius
         return inside & clear
+
+    def unknown(self, margin_cells: float = 1.0) -> np.ndarray:
+        """(ny, nx) bool: the cells the map knows nothing about: not free, and farther than
+        the clearance kept from the walls (plus ``margin_cells``) from every cut segment,
+        so neither wall nor the band beside it. Where the free space ends at such cells no
+        wall bounds it: no camera saw across (a doorway's far side, a corridor beyond the
+        photos' reach)."""
+        from scipy import ndimage
+
+        wall = wall_raster(self.segments, self.mask.shape, self.origin, self.resolution)
+        if not wall.any():
+            return ~self.mask
+        dist = ndimage.distance_transform_edt(~wall) * self.resolution
+        band = self.robot_radius + (CLEARANCE_CELLS + margin_cells) * self.resolution
+        return ~self.mask & (dist > band)
 
     def new_area_m2(self, previous: FreeSpace, margin_m: float) -> float:
         """Free area (m^2) farther than ``margin_m`` from ``previous``'s free cells: space

@@ -137,3 +137,116 @@ def frontier_goals(
         alive &= np.hypot(*(pts - p).T) > spacing_m
         here = p
     return goals
+
+
+# ------------------------------------------------------------------ open frontiers
+# The score's goals (scenebot.goals.select) can only value space the mesh contains: a room
+# behind a doorway, seen by no photo, is not in the map, so no candidate lies there and no
+# score asks for it. Its doorway shows in the free space as an *open* boundary: free cells
+# next to cells the map knows nothing about (FreeSpace.unknown: neither free nor beside a
+# wall), where the free space ends because no camera saw across, not because a wall stops
+# it. Those are the frontiers the score's goals come after.
+
+
+def open_boundary(fs: FreeSpace, min_area_m2: float) -> tuple[np.ndarray, np.ndarray]:
+    """The free space's open boundary.
+
+    Args:
+        fs: the round's free space.
+        min_area_m2: unknown pieces smaller than this (slivers between two photos' lines of
+            sight, inside the room) are not space to explore; unknown cells connected to the
+            raster's border (beyond it the map knows nothing either) always count.
+
+    Returns:
+        ``(boundary, unknown)``: (ny, nx) bool each, the free cells with a 4-neighbour in an
+        unknown piece, and those unknown pieces.
+    """
+    import cv2
+
+    unknown = fs.unknown()
+    if not unknown.any():
+        return np.zeros_like(fs.mask), unknown
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(unknown.astype(np.uint8), connectivity=8)
+    edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    big = stats[:, cv2.CC_STAT_AREA] * fs.resolution**2 >= min_area_m2
+    big[edge] = True
+    big[0] = False  # the background (known cells)
+    unknown = big[lab] & unknown
+    nb = np.zeros_like(unknown)
+    nb[1:, :] |= unknown[:-1, :]
+    nb[:-1, :] |= unknown[1:, :]
+    nb[:, 1:] |= unknown[:, :-1]
+    nb[:, :-1] |= unknown[:, 1:]
+    free = fs.mask.copy()
+    # the raster's border: a free cell there has the unknown beyond it
+    border = np.zeros_like(free)
+    border[[0, -1], :] = True
+    border[:, [0, -1]] = True
+    return free & (nb | border), unknown
+
+
+def open_frontier_goals(
+    fs: FreeSpace,
+    min_area_m2: float,
+    min_width_m: float,
+    look_m: float,
+    visited_xy: np.ndarray,
+    k: int,
+) -> tuple[list[dict], np.ndarray, np.ndarray]:
+    """Goals at the free space's open boundary (:func:`open_boundary`), widest opening first.
+
+    The open boundary's cells within ``look_m`` of a place already visited for a frontier
+    (``visited_xy``: earlier rounds' frontier goals, reached or abandoned) are dropped: from
+    there a fan of photos looked across and the map still holds nothing beyond (a plain wall
+    no feature shows, a window); the next round asks somewhere else or not at all. The rest
+    fall into pieces (8-connected); a piece narrower than ``min_width_m`` (its longest
+    extent) is a notch in the outline, not an opening. Each piece's goal looks from its free
+    cell nearest to the piece's middle that keeps the robot's clearance at the mean direction
+    of the unknown cells within ``look_m``, standing back from it by up to half of
+    ``look_m`` (the first place back along that line the free space holds).
+
+    Returns:
+        ``(goals, boundary, unknown)``: up to ``k`` goals ``{"x", "y", "theta",
+        "opening_m"}`` (m, rad; ``opening_m`` the piece's extent), and the rasters of
+        :func:`open_boundary` (after the visited cells are dropped), for the picture.
+    """
+    import cv2
+
+    boundary, unknown = open_boundary(fs, min_area_m2)
+    res = fs.resolution
+    jj, ii = np.nonzero(boundary)
+    xy = fs.origin + (np.stack([ii, jj], 1) + 0.5) * res
+    visited = np.asarray(visited_xy, float).reshape(-1, 2)
+    if len(visited) and len(xy):
+        d = np.hypot(xy[:, None, 0] - visited[None, :, 0], xy[:, None, 1] - visited[None, :, 1])
+        near = (d <= look_m).any(axis=1)
+        boundary[jj[near], ii[near]] = False
+    n, lab = cv2.connectedComponents(boundary.astype(np.uint8), connectivity=8)
+    uj, ui = np.nonzero(unknown)
+    unknown_xy = fs.origin + (np.stack([ui, uj], 1) + 0.5) * res
+    pieces = []
+    for c in range(1, n):
+        pj, pi = np.nonzero(lab == c)
+        pts = fs.origin + (np.stack([pi, pj], 1) + 0.5) * res
+        span = pts.max(axis=0) - pts.min(axis=0) + res
+        width = float(np.hypot(*span))
+        if width < min_width_m:
+            continue
+        ok = fs.contains(pts)
+        if not ok.any():
+            continue
+        mid = pts.mean(axis=0)
+        p = pts[ok][np.argmin(np.hypot(*(pts[ok] - mid).T))]
+        near = unknown_xy[np.hypot(*(unknown_xy - p).T) <= look_m]
+        v = (near - p).mean(axis=0) if len(near) else np.zeros(2)
+        theta = float(np.arctan2(v[1], v[0])) if np.hypot(*v) > 1e-9 else 0.0
+        # stand back from the opening by up to half the look distance, where the free space
+        # allows: the photos then frame the opening with the known walls beside it (they
+        # register by those) instead of a close-up of whatever lies beyond
+        u = np.array([np.cos(theta), np.sin(theta)])
+        backs = p[None] - np.linspace(0.5 * look_m, 0.0, 5)[:, None] * u[None]
+        p = backs[np.argmax(fs.contains(backs))]
+        pieces.append({"x": float(p[0]), "y": float(p[1]), "theta": theta,
+                       "opening_m": round(width, 3)})  # fmt: skip
+    pieces.sort(key=lambda g: -g["opening_m"])
+    return pieces[:k], boundary, unknown

@@ -20,13 +20,33 @@ def plot_goals(
     goals: np.ndarray,
     title: str,
     abandoned: list[dict] | None = None,
+    front: dict | None = None,
 ) -> None:
     """Score heat map over the free space (candidate positions coloured by view score, degrees)
     with the chosen goals as arrows along their headings, and the goals abandoned in earlier
-    rounds (their surroundings not chosen again) as red crosses."""
+    rounds (their surroundings not chosen again) as red crosses. With ``front`` (the goals
+    stage's open frontiers): the open boundary in green, the frontier goals as green arrows
+    (numbered first), the places visited for one as green circles."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 6))
     draw_freespace(ax, fs)
+    n_front = 0
+    if front is not None:
+        n_front = len(front["goals"])
+        jj, ii = np.nonzero(front["boundary"])
+        bxy = fs.origin + (np.stack([ii, jj], 1) + 0.5) * fs.resolution
+        ax.scatter(bxy[:, 0], bxy[:, 1], s=3, marker="s", color="limegreen",
+                   label=f"open boundary ({len(bxy)} cells)")  # fmt: skip
+        for r, g in enumerate(front["goals"]):
+            x, y, t = g["x"], g["y"], g["theta"]
+            tip = (x + 0.35 * np.cos(t), y + 0.35 * np.sin(t))
+            arrow = {"arrowstyle": "-|>", "color": "limegreen", "lw": 2.5}
+            ax.annotate("", xy=tip, xytext=(x, y), arrowprops=arrow)
+            ax.text(x, y, str(r), color="limegreen", fontsize=9, ha="right", va="top")
+        if front["visited"]:
+            vxy = np.array([[v["x"], v["y"]] for v in front["visited"]])
+            ax.scatter(vxy[:, 0], vxy[:, 1], s=80, facecolors="none", edgecolors="limegreen",
+                       label=f"frontiers visited ({len(vxy)})")  # fmt: skip
     ok = np.isfinite(score)
     sc = ax.scatter(poses[ok, 0], poses[ok, 1], c=score[ok], s=9, cmap="inferno", alpha=0.85)
     fig.colorbar(sc, ax=ax, label="view score (deg, higher = poorer predicted rendering)")
@@ -39,11 +59,12 @@ def plot_goals(
             xytext=(x, y),
             arrowprops={"arrowstyle": "-|>", "color": "cyan", "lw": 2},
         )
-        ax.text(x, y, str(r), color="cyan", fontsize=9, ha="right", va="top")
+        ax.text(x, y, str(r + n_front), color="cyan", fontsize=9, ha="right", va="top")
     if abandoned:
         xy = np.array([[a["x"], a["y"]] for a in abandoned])
         ax.scatter(xy[:, 0], xy[:, 1], marker="X", s=90, color="red", ec="k", zorder=5,
                    label=f"abandoned in earlier rounds ({len(xy)})")  # fmt: skip
+    if abandoned or front is not None:
         ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title)
     fig.tight_layout()

@@ -109,7 +109,11 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
                                   cfg.min_score_gain, cfg.min_area_gain, map_images,
                                   new_area, patience=cfg.patience,
                                   map_photos=map_photos)  # fmt: skip
-    chosen, backups = ranked[: cfg.k], ranked[cfg.k :]
+    front = None
+    if cfg.open_frontiers:
+        front = _open_frontiers(cfg, fs, inputs.previous_goals_json, abandoned)
+    n_front = 0 if front is None else len(front["goals"])
+    chosen, backups = ranked[: cfg.k - n_front], ranked[cfg.k - n_front :]
     doc = goals_document(
         poses,
         score,
@@ -134,6 +138,8 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
         },
     )
     apply_stopping_rule(doc, returns, cfg.complete_threshold_deg)
+    if front is not None:
+        _apply_open_frontiers(doc, front, where)
     _apply_stuck(doc, idle_rounds(map_images, inputs.previous_goals_json, abandoned,
                                   cfg.patience, map_photos))  # fmt: skip
     if doc["complete"]:
@@ -146,8 +152,56 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
         from scenebot.goals.plots import plot_goals
 
         title = f"{where}: goals (complete={doc['complete']})"
-        plot_goals(outputs.goals_png, fs, poses, score, chosen, title, abandoned)
+        plot_goals(outputs.goals_png, fs, poses, score, chosen, title, abandoned,
+                   front)  # fmt: skip
     return doc
+
+
+def _open_frontiers(cfg: GoalsConfig, fs: FreeSpace, previous_goals_json: Path | None,
+                    abandoned: list[dict]) -> dict:  # fmt: skip
+    """The round's open-frontier goals (:func:`scenebot.goals.frontier.open_frontier_goals`),
+    away from the places visited for one in earlier rounds (the previous goals.json's
+    ``frontiers_visited`` and its frontier goals) and from the goals abandoned so far."""
+    from scenebot.goals.frontier import open_frontier_goals
+
+    visited: list[dict] = []
+    if previous_goals_json is not None and Path(previous_goals_json).is_file():
+        prev = json.loads(Path(previous_goals_json).read_text(encoding="utf-8"))
+        visited += list(prev.get("frontiers_visited") or [])
+        visited += [{"x": g["x"], "y": g["y"]} for g in prev.get("goals", []) if g.get("frontier")]
+    avoid = visited + [{"x": a["x"], "y": a["y"]} for a in abandoned]
+    xy = np.array([[v["x"], v["y"]] for v in avoid], float).reshape(-1, 2)
+    goals, boundary, unknown = open_frontier_goals(
+        fs, cfg.frontier_min_area_m2, fs.robot_radius, cfg.frontier_look_m, xy, cfg.k
+    )
+    return {"goals": goals, "boundary": boundary, "unknown": unknown, "visited": visited}
+
+
+def _apply_open_frontiers(doc: dict, front: dict, where: str) -> None:
+    """The open-frontier goals first in goals.json (``frontier: true``, then the score's,
+    ranks after them); ``open_frontiers`` says what was found, ``frontiers_visited`` carries
+    the places visited for one to the next round; a map with a frontier left is not
+    complete (``complete_because`` then goes to ``not_complete_because``)."""
+    goals = front["goals"]
+    n = len(goals)
+    doc["goals"] = [
+        {**_goal_record(r, g), "frontier": True, "opening_m": g["opening_m"]}
+        for r, g in enumerate(goals)
+    ] + [{**g, "rank": g["rank"] + n} for g in doc["goals"]]
+    doc["open_frontiers"] = {
+        "goals": n,
+        "boundary_cells": int(front["boundary"].sum()),
+        "unknown_cells": int(front["unknown"].sum()),
+        "visited": len(front["visited"]),
+    }
+    doc["frontiers_visited"] = front["visited"]
+    if n and doc["complete"]:
+        doc["complete"] = False
+        doc["not_complete_because"] = (
+            f"{n} open frontier(s) left (free space that ends where no wall does, widest "
+            f"{goals[0]['opening_m']:.2f} m), though {doc.pop('complete_because')}"
+        )
+        log.info("%s: %s", where, doc["not_complete_because"])
 
 
 def _avoid_abandoned(valid: np.ndarray, poses: np.ndarray, abandoned: list[dict],

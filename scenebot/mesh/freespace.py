@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenebot.artifacts.freespace import FreeSpace, FreeSpaceError
+from scenebot.artifacts.freespace import CLEARANCE_CELLS, FreeSpace, FreeSpaceError, wall_raster
 
 
 def cut_segments(verts: np.ndarray, faces: np.ndarray, z: float) -> np.ndarray:
@@ -186,18 +186,10 @@ def compute_freespace(
             f"{where}: the free-space raster would have {shape.prod():.0f} cells; raise "
             "mesh.grid_resolution_m"
         )
-    wall = np.zeros(shape, bool)
-    if len(segs):
-        L = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
-        n = np.maximum(2, np.ceil(L / (0.5 * resolution)).astype(int) + 1)
-        rep = np.repeat(np.arange(len(segs)), n)
-        t = np.concatenate([np.linspace(0, 1, k) for k in n])
-        p = segs[rep, 0] + t[:, None] * (segs[rep, 1] - segs[rep, 0])
-        ij = np.floor((p - origin) / resolution).astype(int)
-        wall[ij[:, 1], ij[:, 0]] = True
+    wall = wall_raster(segs, tuple(shape), origin, resolution)
     dist = ndimage.distance_transform_edt(~wall) * resolution
     # cell centre within robot_radius + half a cell diagonal of a wall cell centre -> blocked
-    free = dist > robot_radius + 0.71 * resolution
+    free = dist > robot_radius + CLEARANCE_CELLS * resolution
     # only space the cameras have looked across: where the map has holes (walls never
     # photographed) the region would otherwise flow around the outside of the mapped walls
     free &= line_of_sight(wall, cam_xy.reshape(-1, 2), origin, resolution)
