@@ -26,10 +26,11 @@ def _walls(segments_xy):
     return np.array(verts, float), np.array(faces, int)
 
 
-def _room(door: bool):
-    """A 4 m x 3 m room photographed from inside; with ``door`` a 0.9 m doorway in its east
-    wall (x = 4, y 1.0-1.9) to a room no photo saw (not in the mesh, no point of it)."""
-    east = [((4, 0), (4, 1.0)), ((4, 1.9), (4, 3))] if door else [((4, 0), (4, 3))]
+def _room(door: bool, doors: tuple = ((1.0, 1.9),)):
+    """A 4 m x 3 m room photographed from inside; with ``door`` 0.9 m doorways in its east
+    wall (x = 4, ``doors``: y from, to) to rooms no photo saw (not in the mesh, no point)."""
+    ys = [0.0, *(y for d in doors for y in d), 3.0] if door else [0.0, 3.0]
+    east = [((4, ys[i]), (4, ys[i + 1])) for i in range(0, len(ys), 2)]
     segs = [((0, 0), (4, 0)), ((4, 3), (0, 3)), ((0, 3), (0, 0)), *east]
     V, F = _walls(segs)
     cams = np.array([[1.0, 1.0], [1.0, 2.0], [2.0, 1.5], [3.0, 1.0], [3.0, 2.0]])
@@ -112,3 +113,12 @@ def test_goals_abandoned_near_a_doorway_are_not_asked_for_as_frontiers():
     near_door = [{"x": 3.7, "y": 1.45, "theta": 0.0}]
     front = _open_frontiers(GoalsConfig(), fs, None, near_door)
     assert front["goals"] == []
+
+
+def test_one_goal_per_opening():
+    fs = _room(door=True, doors=((0.3, 1.2), (1.8, 2.7)))
+    two, _, _ = open_frontier_goals(fs, 0.25, RADIUS, 1.0, np.zeros((0, 2)), 5)
+    assert len(two) == 2 and abs(two[0]["y"] - two[1]["y"]) > 1.0
+    assert all(np.cos(g["theta"]) > 0.8 for g in two)
+    # goals closer than the look distance are taken for pieces of one opening
+    assert len(open_frontier_goals(fs, 0.25, RADIUS, 3.0, np.zeros((0, 2)), 5)[0]) == 1

@@ -203,7 +203,8 @@ def open_frontier_goals(
     extent) is a notch in the outline, not an opening. Each piece's goal looks from its free
     cell nearest to the piece's middle that keeps the robot's clearance at the mean direction
     of the unknown cells within ``look_m``, standing back from it by up to half of
-    ``look_m`` (the first place back along that line the free space holds).
+    ``look_m`` (the first place back along that line the free space holds); a goal within
+    ``look_m`` of a wider opening's goal is left out (two pieces of one outline).
 
     Returns:
         ``(goals, boundary, unknown)``: up to ``k`` goals ``{"x", "y", "theta",
@@ -249,4 +250,9 @@ def open_frontier_goals(
         pieces.append({"x": float(p[0]), "y": float(p[1]), "theta": theta,
                        "opening_m": round(width, 3)})  # fmt: skip
     pieces.sort(key=lambda g: -g["opening_m"])
-    return pieces[:k], boundary, unknown
+    goals: list[dict] = []
+    for g in pieces:  # one goal per opening: pieces of one outline lie side by side
+        if len(goals) < k and all(np.hypot(g["x"] - o["x"], g["y"] - o["y"]) > look_m
+                                  for o in goals):  # fmt: skip
+            goals.append(g)
+    return goals, boundary, unknown
