@@ -48,12 +48,12 @@ def _room(door: bool, doors: tuple = ((1.0, 1.9),)):
 
 def test_a_doorway_to_an_unseen_room_is_an_open_frontier_looked_through():
     fs = _room(door=True)
-    boundary, _ = open_boundary(fs, 0.25)
+    boundary, _ = open_boundary(fs)
     assert boundary.any() and not (boundary & ~fs.mask).any()
     jj, ii = np.nonzero(boundary)
     xy = fs.origin + (np.stack([ii, jj], 1) + 0.5) * fs.resolution
     assert np.all(xy[:, 0] > 3.2) and np.all((xy[:, 1] > 0.9) & (xy[:, 1] < 2.0))  # the door
-    goals, _, _ = open_frontier_goals(fs, 0.25, RADIUS, 1.0, np.zeros((0, 2)), k=5)
+    goals, _, _ = open_frontier_goals(fs, RADIUS, 1.0, np.zeros((0, 2)), k=5)
     assert len(goals) == 1
     g = goals[0]
     assert 2.7 < g["x"] < 4.2 and abs(g["y"] - 1.45) < 0.25
@@ -61,23 +61,30 @@ def test_a_doorway_to_an_unseen_room_is_an_open_frontier_looked_through():
     assert fs.contains(np.array([[g["x"], g["y"]]]))[0]
     assert RADIUS <= g["opening_m"] <= 0.9 + 0.1
     # a place already visited for it: looked across once, not asked again
-    again, _, _ = open_frontier_goals(fs, 0.25, RADIUS, 1.0, np.array([[g["x"], g["y"]]]), 5)
+    again, _, _ = open_frontier_goals(fs, RADIUS, 1.0, np.array([[g["x"], g["y"]]]), 5)
     assert again == []
 
 
 def test_a_closed_room_has_no_open_frontier():
     fs = _room(door=False)
-    boundary, _ = open_boundary(fs, 0.25)
+    boundary, _ = open_boundary(fs)
     assert not boundary.any()
-    assert open_frontier_goals(fs, 0.25, RADIUS, 1.0, np.zeros((0, 2)), 5)[0] == []
+    assert open_frontier_goals(fs, RADIUS, 1.0, np.zeros((0, 2)), 5)[0] == []
 
 
-def test_small_unknown_pockets_are_not_frontiers():
+def test_unknown_pockets_inside_the_walls_are_not_frontiers():
+    """Space no line of sight crossed inside the mapped walls (the shadow of a piece of
+    furniture) is the score's to value, whatever its size: only space the mesh does not
+    enclose is a frontier."""
     fs = _room(door=False)
-    fs.mask[28:31, 38:41] = False  # a 15 cm hole in the middle no line of sight crossed
-    boundary, _ = open_boundary(fs, 0.25)
-    assert not boundary.any()
-    assert open_boundary(fs, 0.0)[0].any()  # a pocket, when every unknown piece counts
+    fs.mask[20:40, 30:50] = False  # a 1 m x 1 m hole in the middle no line of sight crossed
+    boundary, unknown = open_boundary(fs)
+    assert not boundary.any() and not unknown[20:40, 30:50].any()
+    with_door = _room(door=True)
+    with_door.mask[20:40, 30:50] = False
+    boundary, _ = open_boundary(with_door)
+    _, ii = np.nonzero(boundary)
+    assert boundary.any() and ((ii + 0.5) * 0.05 + with_door.origin[0]).min() > 3.0  # door only
 
 
 @pytest.mark.parametrize("door", [True, False])
@@ -117,8 +124,8 @@ def test_goals_abandoned_near_a_doorway_are_not_asked_for_as_frontiers():
 
 def test_one_goal_per_opening():
     fs = _room(door=True, doors=((0.3, 1.2), (1.8, 2.7)))
-    two, _, _ = open_frontier_goals(fs, 0.25, RADIUS, 1.0, np.zeros((0, 2)), 5)
+    two, _, _ = open_frontier_goals(fs, RADIUS, 1.0, np.zeros((0, 2)), 5)
     assert len(two) == 2 and abs(two[0]["y"] - two[1]["y"]) > 1.0
     assert all(np.cos(g["theta"]) > 0.8 for g in two)
     # goals closer than the look distance are taken for pieces of one opening
-    assert len(open_frontier_goals(fs, 0.25, RADIUS, 3.0, np.zeros((0, 2)), 5)[0]) == 1
+    assert len(open_frontier_goals(fs, RADIUS, 3.0, np.zeros((0, 2)), 5)[0]) == 1

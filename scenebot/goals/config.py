@@ -37,13 +37,12 @@ class GoalsConfig(Settings):
     open_frontiers: bool = Field(
         True,
         description="The score's goals come after the free space's open frontiers: where the "
-        "free space ends at space the map knows nothing about (no wall bounds it: a doorway's "
+        "free space ends at space the mesh does not enclose (no wall bounds it: a doorway's "
         "far side), a goal looks across, widest opening first (up to k a round; "
         "scenebot.goals.frontier.open_frontier_goals); a place visited for one is not asked "
         "for again, and the map is not complete while one is left. The score cannot value "
-        "space the mesh does not contain. Unknown pieces smaller than frontier_min_area_m2 "
-        "and openings narrower than the robot's radius do not count. false: the score's goals "
-        "alone (the paper).",
+        "space the mesh does not contain. Openings narrower than the robot's radius do not "
+        "count. false: the score's goals alone (the paper).",
     )
     nms_radius_m: float = Field(
         0.5, ge=0.0, description="Two goals closer than this (m) must differ in heading."

@@ -148,37 +148,37 @@ def frontier_goals(
 # it. Those are the frontiers the score's goals come after.
 
 
-def open_boundary(fs: FreeSpace, min_area_m2: float) -> tuple[np.ndarray, np.ndarray]:
-    """The free space's open boundary.
+def open_boundary(fs: FreeSpace) -> tuple[np.ndarray, np.ndarray]:
+    """The free space's open boundary: where it meets space the mesh does not enclose.
 
-    Args:
-        fs: the round's free space.
-        min_area_m2: unknown pieces smaller than this (slivers between two photos' lines of
-            sight, inside the room) are not space to explore; unknown cells connected to the
-            raster's border (beyond it the map knows nothing either) always count.
+    Unknown cells (:meth:`FreeSpace.unknown`) in a piece that reaches the raster's border
+    (the raster spans the mesh with a margin, so its border lies outside every cut wall) lie
+    beyond an opening of the mesh's outline at least as wide as the clearance band on both
+    sides of a wall (about 0.5 m: a doorway, a corridor's mouth); pieces the cut walls
+    enclose (the shadow of a sofa no line of sight crossed, a strip along a wall few rays
+    reached) lie inside the mapped room, whose surfaces the mesh holds and the score
+    values. A free cell on the raster's border has the unknown beyond it.
 
     Returns:
         ``(boundary, unknown)``: (ny, nx) bool each, the free cells with a 4-neighbour in an
-        unknown piece, and those unknown pieces.
+        unknown piece outside the mesh, and those unknown pieces.
     """
     import cv2
 
     unknown = fs.unknown()
     if not unknown.any():
         return np.zeros_like(fs.mask), unknown
-    _, lab, stats, _ = cv2.connectedComponentsWithStats(unknown.astype(np.uint8), connectivity=8)
-    edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-    big = stats[:, cv2.CC_STAT_AREA] * fs.resolution**2 >= min_area_m2
-    big[edge] = True
-    big[0] = False  # the background (known cells)
-    unknown = big[lab] & unknown
+    _, lab = cv2.connectedComponents(unknown.astype(np.uint8), connectivity=8)
+    outside = np.zeros(int(lab.max()) + 1, bool)
+    outside[np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))] = True
+    outside[0] = False  # the background (known cells)
+    unknown = outside[lab] & unknown
     nb = np.zeros_like(unknown)
     nb[1:, :] |= unknown[:-1, :]
     nb[:-1, :] |= unknown[1:, :]
     nb[:, 1:] |= unknown[:, :-1]
     nb[:, :-1] |= unknown[:, 1:]
     free = fs.mask.copy()
-    # the raster's border: a free cell there has the unknown beyond it
     border = np.zeros_like(free)
     border[[0, -1], :] = True
     border[:, [0, -1]] = True
@@ -187,7 +187,6 @@ def open_boundary(fs: FreeSpace, min_area_m2: float) -> tuple[np.ndarray, np.nda
 
 def open_frontier_goals(
     fs: FreeSpace,
-    min_area_m2: float,
     min_width_m: float,
     look_m: float,
     visited_xy: np.ndarray,
@@ -213,7 +212,7 @@ def open_frontier_goals(
     """
     import cv2
 
-    boundary, unknown = open_boundary(fs, min_area_m2)
+    boundary, unknown = open_boundary(fs)
     res = fs.resolution
     jj, ii = np.nonzero(boundary)
     xy = fs.origin + (np.stack([ii, jj], 1) + 0.5) * res

@@ -20,7 +20,7 @@ from scenebot.goals.failures import (
     near_abandoned,
     unfulfilled_shots,
 )
-from scenebot.goals.select import goals_document, select_goals, write_goals
+from scenebot.goals.select import goals_document, heading_difference, select_goals, write_goals
 from scenebot.goals.stopping import apply_stopping_rule, diminishing_returns
 
 log = logging.getLogger(__name__)
@@ -93,6 +93,13 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
         score = np.where(valid, cols["score_deg"], np.nan)
         return _frontier_goals(cfg, inputs, outputs, fs, score, where, abandoned)
     avoided = _avoid_abandoned(valid, poses, abandoned, cfg.nms_radius_m, where)
+    front = None
+    if cfg.open_frontiers:
+        front = _open_frontiers(cfg, fs, inputs.previous_goals_json, abandoned)
+        for g in front["goals"]:  # the score's goals differ from them as from each other
+            near = np.hypot(poses[:, 0] - g["x"], poses[:, 1] - g["y"]) < cfg.nms_radius_m
+            same = heading_difference(poses[:, 2], g["theta"]) <= np.deg2rad(cfg.nms_angle_deg)
+            valid &= ~(near & same)
     score = np.where(valid, cols["score_deg"], np.nan)
     ranked = select_goals(
         poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
@@ -109,9 +116,6 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
                                   cfg.min_score_gain, cfg.min_area_gain, map_images,
                                   new_area, patience=cfg.patience,
                                   map_photos=map_photos)  # fmt: skip
-    front = None
-    if cfg.open_frontiers:
-        front = _open_frontiers(cfg, fs, inputs.previous_goals_json, abandoned)
     n_front = 0 if front is None else len(front["goals"])
     chosen, backups = ranked[: cfg.k - n_front], ranked[cfg.k - n_front :]
     doc = goals_document(
@@ -172,7 +176,7 @@ def _open_frontiers(cfg: GoalsConfig, fs: FreeSpace, previous_goals_json: Path |
     avoid = visited + [{"x": a["x"], "y": a["y"]} for a in abandoned]
     xy = np.array([[v["x"], v["y"]] for v in avoid], float).reshape(-1, 2)
     goals, boundary, unknown = open_frontier_goals(
-        fs, cfg.frontier_min_area_m2, fs.robot_radius, cfg.frontier_look_m, xy, cfg.k
+        fs, fs.robot_radius, cfg.frontier_look_m, xy, cfg.k
     )
     return {"goals": goals, "boundary": boundary, "unknown": unknown, "visited": visited}
 
