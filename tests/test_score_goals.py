@@ -536,3 +536,20 @@ def test_a_persons_guided_rounds_measure_the_free_volume(tmp_path):
                                size_key="free_volume_m3")  # fmt: skip
     assert not grew["complete"] and grew["area_gain"] == pytest.approx(0.2)
     assert diminishing_returns(39.0, 30.5, p, 0.15, 0.1, 45, patience=1) is None  # no area
+
+
+def test_open_frontiers_come_first_when_on(scored_room, tmp_path):
+    """goals.open_frontiers: the room's unphotographed east (no wall in the mesh there) is an
+    open frontier; its goal comes first in goals.json, looking east, and the score's fill the
+    rest; off (the default), the goals are the score's alone."""
+    inputs = GoalsInputs(scored_room["so"].candidates_csv, scored_room["mo"].freespace_npz)
+    on = run_goals(GoalsConfig(k=6, min_matchable_points=0, open_frontiers=True), inputs,
+                   GoalsOutputs(tmp_path / "on.json", tmp_path / "on.png"))  # fmt: skip
+    off = run_goals(GoalsConfig(k=6, min_matchable_points=0), inputs,
+                    GoalsOutputs(tmp_path / "off.json"))  # fmt: skip
+    front = [g for g in on["goals"] if g.get("frontier")]
+    assert front and on["goals"][: len(front)] == front and len(on["goals"]) <= 6
+    assert all(np.cos(g["theta"]) > 0 for g in front)
+    assert on["open_frontiers"]["goals"] == len(front) and not on["complete"]
+    assert (tmp_path / "on.png").stat().st_size > 1000
+    assert "open_frontiers" not in off and not any(g.get("frontier") for g in off["goals"])
