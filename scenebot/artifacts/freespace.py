@@ -109,6 +109,11 @@ class FreeSpace:
         ok = (i >= 0) & (j >= 0) & (i < self.mask.shape[1]) & (j < self.mask.shape[0])
         return np.clip(j, 0, self.mask.shape[0] - 1), np.clip(i, 0, self.mask.shape[1] - 1), ok
 
+    def cell_centres(self, cells: np.ndarray) -> np.ndarray:
+        """(N, 2) centres (m) of the True cells of ``cells`` ((ny, nx) bool), row-major."""
+        jj, ii = np.nonzero(cells)
+        return self.origin + (np.stack([ii, jj], 1) + 0.5) * self.resolution
+
     def contains(self, xy: np.ndarray) -> np.ndarray:
         """(N,) bool: points (N, 2) (m) in free space (free cell and exact clearance)."""
         j, i, ok = self.cell_of(xy)
@@ -141,9 +146,7 @@ class FreeSpace:
         if k > 0:
             disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
             grown = cv2.dilate(grown, disk)
-        jj, ii = np.nonzero(self.mask)
-        centres = self.origin + (np.stack([ii, jj], 1) + 0.5) * self.resolution
-        j, i, ok = previous.cell_of(centres)
+        j, i, ok = previous.cell_of(self.cell_centres(self.mask))
         known = ok & (grown[j, i] > 0)
         return float((~known).sum()) * self.resolution**2
 

@@ -86,15 +86,19 @@ def unseen_cells(fs: FreeSpace, seen: np.ndarray, min_area_m2: float = 0.0) -> n
     return big[lab] & unseen
 
 
+def next_to(cells: np.ndarray) -> np.ndarray:
+    """(ny, nx) bool: the cells with a 4-neighbour in ``cells``."""
+    nb = np.zeros_like(cells)
+    nb[1:, :] |= cells[:-1, :]
+    nb[:-1, :] |= cells[1:, :]
+    nb[:, 1:] |= cells[:, :-1]
+    nb[:, :-1] |= cells[:, 1:]
+    return nb
+
+
 def frontier_cells(fs: FreeSpace, seen: np.ndarray, min_area_m2: float = 0.0) -> np.ndarray:
     """Seen free cells with an unseen free 4-neighbour (see :func:`unseen_cells`): (ny, nx)."""
-    unseen = unseen_cells(fs, seen, min_area_m2)
-    nb = np.zeros_like(unseen)
-    nb[1:, :] |= unseen[:-1, :]
-    nb[:-1, :] |= unseen[1:, :]
-    nb[:, 1:] |= unseen[:, :-1]
-    nb[:, :-1] |= unseen[:, 1:]
-    return seen & nb
+    return seen & next_to(unseen_cells(fs, seen, min_area_m2))
 
 
 def frontier_goals(
@@ -113,14 +117,11 @@ def frontier_goals(
         left. A goal must pass :meth:`FreeSpace.contains` (clearance from the walls).
     """
     front = frontier_cells(fs, seen, min_area_m2)
-    jj, ii = np.nonzero(front)
-    if len(jj) == 0:
+    if not front.any():
         return []
-    res = fs.resolution
-    pts = fs.origin + (np.stack([ii, jj], 1) + 0.5) * res
+    pts = fs.cell_centres(front)
     pts = pts[fs.contains(pts)]
-    uj, ui = np.nonzero(unseen_cells(fs, seen, min_area_m2))
-    unseen = fs.origin + (np.stack([ui, uj], 1) + 0.5) * res
+    unseen = fs.cell_centres(unseen_cells(fs, seen, min_area_m2))
     goals: list[dict] = []
     here = np.asarray(start_xy, float)
     alive = np.ones(len(pts), bool)
@@ -173,16 +174,10 @@ def open_boundary(fs: FreeSpace) -> tuple[np.ndarray, np.ndarray]:
     outside[np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))] = True
     outside[0] = False  # the background (known cells)
     unknown = outside[lab] & unknown
-    nb = np.zeros_like(unknown)
-    nb[1:, :] |= unknown[:-1, :]
-    nb[:-1, :] |= unknown[1:, :]
-    nb[:, 1:] |= unknown[:, :-1]
-    nb[:, :-1] |= unknown[:, 1:]
-    free = fs.mask.copy()
-    border = np.zeros_like(free)
+    border = np.zeros_like(fs.mask)
     border[[0, -1], :] = True
     border[:, [0, -1]] = True
-    return free & (nb | border), unknown
+    return fs.mask & (next_to(unknown) | border), unknown
 
 
 def open_frontier_goals(
@@ -213,22 +208,19 @@ def open_frontier_goals(
     import cv2
 
     boundary, unknown = open_boundary(fs)
-    res = fs.resolution
     jj, ii = np.nonzero(boundary)
-    xy = fs.origin + (np.stack([ii, jj], 1) + 0.5) * res
+    xy = fs.cell_centres(boundary)
     visited = np.asarray(visited_xy, float).reshape(-1, 2)
     if len(visited) and len(xy):
         d = np.hypot(xy[:, None, 0] - visited[None, :, 0], xy[:, None, 1] - visited[None, :, 1])
         near = (d <= look_m).any(axis=1)
         boundary[jj[near], ii[near]] = False
     n, lab = cv2.connectedComponents(boundary.astype(np.uint8), connectivity=8)
-    uj, ui = np.nonzero(unknown)
-    unknown_xy = fs.origin + (np.stack([ui, uj], 1) + 0.5) * res
+    unknown_xy = fs.cell_centres(unknown)
     pieces = []
     for c in range(1, n):
-        pj, pi = np.nonzero(lab == c)
-        pts = fs.origin + (np.stack([pi, pj], 1) + 0.5) * res
-        span = pts.max(axis=0) - pts.min(axis=0) + res
+        pts = fs.cell_centres(lab == c)
+        span = pts.max(axis=0) - pts.min(axis=0) + fs.resolution
         width = float(np.hypot(*span))
         if width < min_width_m:
             continue

@@ -33,8 +33,7 @@ def plot_goals(
     n_front = 0
     if front is not None:
         n_front = len(front["goals"])
-        jj, ii = np.nonzero(front["boundary"])
-        bxy = fs.origin + (np.stack([ii, jj], 1) + 0.5) * fs.resolution
+        bxy = fs.cell_centres(front["boundary"])
         ax.scatter(bxy[:, 0], bxy[:, 1], s=3, marker="s", color="limegreen",
                    label=f"open boundary ({len(bxy)} cells)")  # fmt: skip
         for r, g in enumerate(front["goals"]):

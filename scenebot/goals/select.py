@@ -22,6 +22,13 @@ def heading_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.abs((np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi)
 
 
+def same_view(poses: np.ndarray, pose: np.ndarray, radius_m: float, angle_deg: float) -> np.ndarray:
+    """(N,) bool: which of ``poses`` (N, 3) are closer than ``radius_m`` to ``pose`` (x, y,
+    theta) AND within ``angle_deg`` of its heading: views a goal there already takes."""
+    near = np.hypot(poses[:, 0] - pose[0], poses[:, 1] - pose[1]) < radius_m
+    return near & (heading_difference(poses[:, 2], pose[2]) <= np.deg2rad(angle_deg))
+
+
 def select_goals(
     poses: np.ndarray,
     score: np.ndarray,
@@ -48,16 +55,11 @@ def select_goals(
     """
     idx = _ranked(score, valid)
     chosen: list[int] = []
-    thr = np.deg2rad(angle_deg)
     for c in idx:
         if len(chosen) == k:
             break
-        if chosen:
-            g = poses[chosen]
-            near = np.hypot(g[:, 0] - poses[c, 0], g[:, 1] - poses[c, 1]) < radius_m
-            same = heading_difference(g[:, 2], poses[c, 2]) <= thr
-            if (near & same).any():
-                continue
+        if chosen and same_view(poses[chosen], poses[c], radius_m, angle_deg).any():
+            continue
         chosen.append(int(c))
     return np.array(chosen, dtype=np.int64)
 

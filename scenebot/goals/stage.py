@@ -20,7 +20,7 @@ from scenebot.goals.failures import (
     near_abandoned,
     unfulfilled_shots,
 )
-from scenebot.goals.select import goals_document, heading_difference, select_goals, write_goals
+from scenebot.goals.select import goals_document, same_view, select_goals, write_goals
 from scenebot.goals.stopping import apply_stopping_rule, diminishing_returns
 
 log = logging.getLogger(__name__)
@@ -97,9 +97,8 @@ def run(cfg: GoalsConfig, inputs: GoalsInputs, outputs: GoalsOutputs, person: bo
     if cfg.open_frontiers:
         front = _open_frontiers(cfg, fs, inputs.previous_goals_json, abandoned)
         for g in front["goals"]:  # the score's goals differ from them as from each other
-            near = np.hypot(poses[:, 0] - g["x"], poses[:, 1] - g["y"]) < cfg.nms_radius_m
-            same = heading_difference(poses[:, 2], g["theta"]) <= np.deg2rad(cfg.nms_angle_deg)
-            valid &= ~(near & same)
+            pose = np.array([g["x"], g["y"], g["theta"]])
+            valid &= ~same_view(poses, pose, cfg.nms_radius_m, cfg.nms_angle_deg)
     score = np.where(valid, cols["score_deg"], np.nan)
     ranked = select_goals(
         poses, score, cfg.k + cfg.backups, cfg.nms_radius_m, cfg.nms_angle_deg, valid
